@@ -1,0 +1,66 @@
+/// Solves `U X = B` in place (back substitution) for upper-triangular `U` (`n x n`,
+/// column-major, leading dimension `ldu`) and `B` (`n x nrhs`, leading dimension `ldb`).
+///
+/// A zero diagonal entry of `U` (a zero row produced by [`crate::triangularize`] for a
+/// zero-variance direction) sets that component of the solution to zero: the
+/// generalised-inverse convention, which conditions on nothing in that direction.
+///
+/// # Complexity
+/// `n^2 nrhs` flops.
+///
+/// # Example
+/// ```
+/// // U = [[2, 1], [0, 4]], b = [4, 8]  ->  x = [1.5, 2]
+/// let u = [2.0, 0.0, 1.0, 4.0];
+/// let mut b = [4.0, 8.0];
+/// sysid_linalg::solve_upper(&u, 2, 2, &mut b, 2, 1);
+/// assert_eq!(b, [1.0, 2.0]);
+/// ```
+pub fn solve_upper(u: &[f64], ldu: usize, n: usize, b: &mut [f64], ldb: usize, nrhs: usize) {
+    for c in 0..nrhs {
+        let x = &mut b[c * ldb..c * ldb + n];
+        for i in (0..n).rev() {
+            let d = u[i * ldu + i];
+            if d == 0.0 {
+                x[i] = 0.0;
+                continue;
+            }
+            let xi = x[i] / d;
+            x[i] = xi;
+            let col = &u[i * ldu..i * ldu + i];
+            for (xk, uk) in x[..i].iter_mut().zip(col) {
+                *xk -= uk * xi;
+            }
+        }
+    }
+}
+
+/// Solves `U' X = B` in place (forward substitution) for upper-triangular `U`; same
+/// layout and zero-pivot convention as [`solve_upper`].
+///
+/// # Example
+/// ```
+/// // U' = [[2, 0], [1, 4]], b = [2, 9]  ->  x = [1, 2]
+/// let u = [2.0, 0.0, 1.0, 4.0];
+/// let mut b = [2.0, 9.0];
+/// sysid_linalg::solve_upper_transpose(&u, 2, 2, &mut b, 2, 1);
+/// assert_eq!(b, [1.0, 2.0]);
+/// ```
+pub fn solve_upper_transpose(
+    u: &[f64],
+    ldu: usize,
+    n: usize,
+    b: &mut [f64],
+    ldb: usize,
+    nrhs: usize,
+) {
+    for c in 0..nrhs {
+        let x = &mut b[c * ldb..c * ldb + n];
+        for i in 0..n {
+            let col = &u[i * ldu..i * ldu + i];
+            let s: f64 = col.iter().zip(x[..i].iter()).map(|(uk, xk)| uk * xk).sum();
+            let d = u[i * ldu + i];
+            x[i] = if d == 0.0 { 0.0 } else { (x[i] - s) / d };
+        }
+    }
+}

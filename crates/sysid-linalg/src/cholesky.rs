@@ -87,7 +87,11 @@ pub fn psd_factor(name: &str, m: &DMatrix<f64>) -> Result<DMatrix<f64>, LinalgEr
     let n = m.nrows();
     let eig = SymmetricEigen::new(m.clone());
     let max_abs = eig.eigenvalues.iter().fold(0.0_f64, |a, &l| a.max(l.abs()));
-    let min = eig.eigenvalues.iter().copied().fold(f64::INFINITY, f64::min);
+    let min = eig
+        .eigenvalues
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
     if min < -PSD_TOL * max_abs {
         return Err(LinalgError::NotPositiveSemiDefinite {
             name: name.to_string(),

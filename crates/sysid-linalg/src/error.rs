@@ -15,7 +15,9 @@ pub enum LinalgError {
     #[error("matrix {name} is not positive semi-definite (smallest eigenvalue {eigenvalue:e})")]
     NotPositiveSemiDefinite { name: String, eigenvalue: f64 },
     /// `M[row, col]` and `M[col, row]` differ by more than the tolerance.
-    #[error("matrix {name} is not symmetric: entry ({row}, {col}) differs from ({col}, {row}) by {difference:e}")]
+    #[error(
+        "matrix {name} is not symmetric: entry ({row}, {col}) differs from ({col}, {row}) by {difference:e}"
+    )]
     NotSymmetric {
         name: String,
         row: usize,

@@ -26,7 +26,7 @@ mod triangular;
 
 pub use cholesky::{check_psd, cholesky_upper, psd_factor};
 pub use error::LinalgError;
-pub use gaussian::{gaussian_logpdf_from_factor, logdet_from_factor, LN_2PI};
-pub use qr::{triangularize, QrScratch};
+pub use gaussian::{LN_2PI, gaussian_logpdf_from_factor, logdet_from_factor};
+pub use qr::{QrScratch, triangularize};
 pub use symmetric::{check_finite, check_symmetric, symmetrize};
 pub use triangular::{solve_upper, solve_upper_transpose};

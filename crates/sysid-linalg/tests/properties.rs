@@ -115,8 +115,10 @@ fn psd_checks_name_the_matrix() {
     assert!(matches!(psd_factor("P1", &asymmetric),
         Err(LinalgError::NotSymmetric { ref name, row: 1, col: 0, .. }) if name == "P1"));
     let nan = DMatrix::from_row_slice(2, 2, &[1.0, f64::NAN, f64::NAN, 1.0]);
-    assert!(matches!(psd_factor("Q", &nan),
-        Err(LinalgError::NonFinite { row: 1, col: 0, .. })));
+    assert!(matches!(
+        psd_factor("Q", &nan),
+        Err(LinalgError::NonFinite { row: 1, col: 0, .. })
+    ));
     let zero = DMatrix::<f64>::zeros(3, 3);
     assert_eq!(psd_factor("Q", &zero).unwrap().nrows(), 0);
 }
@@ -128,7 +130,10 @@ fn dependent_column_gets_zero_row_and_solves_ignore_it() {
     let mut a = x.as_slice().to_vec();
     triangularize(&mut a, 3, 3, 3, &mut QrScratch::default());
     let r = DMatrix::from_column_slice(3, 3, &a);
-    assert_eq!(r.row(1).iter().copied().collect::<Vec<_>>(), vec![0.0, 0.0, 0.0]);
+    assert_eq!(
+        r.row(1).iter().copied().collect::<Vec<_>>(),
+        vec![0.0, 0.0, 0.0]
+    );
     let gram = x.transpose() * &x;
     assert!((r.transpose() * &r - gram).norm() < 1e-12);
     let mut b = vec![1.0, 0.0, 1.0];
@@ -141,7 +146,9 @@ fn dependent_column_gets_zero_row_and_solves_ignore_it() {
 fn more_columns_than_rows() {
     let x = DMatrix::from_row_slice(1, 3, &[3.0, 1.0, 2.0]);
     let mut a = vec![0.0; 9];
-    for j in 0..3 { a[j * 3] = x[(0, j)]; }
+    for j in 0..3 {
+        a[j * 3] = x[(0, j)];
+    }
     triangularize(&mut a, 3, 1, 3, &mut QrScratch::default());
     let r = DMatrix::from_column_slice(3, 3, &a);
     assert!((r.transpose() * &r - x.transpose() * &x).norm() < 1e-12);

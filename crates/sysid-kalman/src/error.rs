@@ -1,0 +1,53 @@
+use sysid_linalg::LinalgError;
+use thiserror::Error;
+
+/// Errors of the linear Gaussian layer. Each variant names the place: the matrix, or
+/// the record and time index (1-based, as in the equations).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum KalmanError {
+    /// A model matrix failed a check (non-finite, non-symmetric, not PSD, ...).
+    #[error("invalid model: {0}")]
+    Matrix(#[from] LinalgError),
+    /// A model matrix or a data array has the wrong shape.
+    #[error("matrix {name} must be {expected_rows}x{expected_cols}, got {rows}x{cols}")]
+    Dimension {
+        name: String,
+        expected_rows: usize,
+        expected_cols: usize,
+        rows: usize,
+        cols: usize,
+    },
+    /// An infinite output, or a NaN/Inf input (NaN outputs mean "missing").
+    #[error("record {record}, time {time}: {what} {index} is {value}")]
+    NonFiniteData {
+        record: usize,
+        time: usize,
+        what: &'static str,
+        index: usize,
+        value: f64,
+    },
+    /// The innovation covariance `C P C' + R` is singular at this step, so the
+    /// observation has no density (e.g. `R = 0` with a perfectly known state).
+    #[error(
+        "record {record}, time {time}: innovation covariance is singular (output {output} is exactly predictable)"
+    )]
+    SingularInnovation {
+        record: usize,
+        time: usize,
+        output: usize,
+    },
+    /// A data set with no record, or a record of length zero.
+    #[error("record {record} has no time steps")]
+    EmptyRecord { record: usize },
+    /// Inputs and outputs of one record disagree in length.
+    #[error("record {record}: inputs have {input_steps} steps but outputs have {output_steps}")]
+    LengthMismatch {
+        record: usize,
+        input_steps: usize,
+        output_steps: usize,
+    },
+}
+
+/// Shorthand for results of this crate.
+pub type Result<T> = std::result::Result<T, KalmanError>;

@@ -1,0 +1,294 @@
+//! The square-root (array) Kalman filter: the default filter of this crate.
+
+use crate::{KalmanError, LinearGaussianModel, Record, Result, dense};
+use nalgebra::{DMatrix, DVectorView};
+use sysid_linalg::{LN_2PI, QrScratch, solve_upper, triangularize};
+
+/// What a filter pass keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Keep {
+    /// Only the log-likelihood (the cheapest pass).
+    LoglikOnly,
+    /// Everything the smoother needs.
+    SmootherInputs,
+}
+
+/// The stored result of a square-root filter pass over one record.
+///
+/// Index `k = 0..T-1` is time `t = k + 1`. Predicted quantities exist for
+/// `k = 0..=T` (`k = T` is the one-step-ahead prediction beyond the data).
+#[derive(Debug, Clone, Default)]
+pub struct FilterOutput {
+    pub(crate) n: usize,
+    pub(crate) t_len: usize,
+    pub(crate) loglik: f64,
+    /// `x_{t|t-1}`, (T+1) x n
+    pub(crate) pred_mean: Vec<f64>,
+    /// factor `U` with `U'U = P_{t|t-1}`, (T+1) x n x n
+    pub(crate) pred_factor: Vec<f64>,
+    /// `x_{t|t}`, T x n
+    pub(crate) filt_mean: Vec<f64>,
+    /// `J_t'` (transposed smoother gain), T x n x n
+    pub(crate) gain_t: Vec<f64>,
+    /// factor of `Cov(x_t | y_{1:t}, x_{t+1})`, T x n x n
+    pub(crate) cond_factor: Vec<f64>,
+}
+
+impl FilterOutput {
+    /// Log-likelihood `log p(y_{1:T})` of the record.
+    pub fn loglik(&self) -> f64 {
+        self.loglik
+    }
+    /// Number of time steps `T`.
+    pub fn len(&self) -> usize {
+        self.t_len
+    }
+    /// Whether the record was empty.
+    pub fn is_empty(&self) -> bool {
+        self.t_len == 0
+    }
+    /// Predicted mean `x_{k+1|k}` (index `k` in `0..=T`).
+    pub fn predicted_mean(&self, k: usize) -> DVectorView<'_, f64> {
+        DVectorView::from_slice(&self.pred_mean[k * self.n..(k + 1) * self.n], self.n)
+    }
+    /// Predicted covariance `P_{k+1|k}` (index `k` in `0..=T`), symmetric PSD by
+    /// construction (`U'U`).
+    pub fn predicted_covariance(&self, k: usize) -> DMatrix<f64> {
+        let n = self.n;
+        let u = &self.pred_factor[k * n * n..(k + 1) * n * n];
+        let mut p = DMatrix::zeros(n, n);
+        dense::mul_tn(p.as_mut_slice(), u, u, n, n, n, false);
+        p
+    }
+    /// Filtered mean `x_{k+1|k+1}` (index `k` in `0..T`).
+    pub fn filtered_mean(&self, k: usize) -> DVectorView<'_, f64> {
+        DVectorView::from_slice(&self.filt_mean[k * self.n..(k + 1) * self.n], self.n)
+    }
+    /// Filtered covariance `P_{k+1|k+1} = X33'X33 + J P_{k+2|k+1} J'` (index `k` in
+    /// `0..T`): a sum of PSD terms.
+    pub fn filtered_covariance(&self, k: usize) -> DMatrix<f64> {
+        let n = self.n;
+        let nn = n * n;
+        let x33 = &self.cond_factor[k * nn..(k + 1) * nn];
+        let jt = &self.gain_t[k * nn..(k + 1) * nn];
+        let u = &self.pred_factor[(k + 1) * nn..(k + 2) * nn];
+        let mut p = DMatrix::zeros(n, n);
+        dense::mul_tn(p.as_mut_slice(), x33, x33, n, n, n, false);
+        let mut uj = vec![0.0; nn];
+        dense::mul_nn(&mut uj, u, jt, n, n, n);
+        dense::mul_tn(p.as_mut_slice(), &uj, &uj, n, n, n, true);
+        dense::symmetrize(p.as_mut_slice(), n);
+        p
+    }
+}
+
+/// Buffers for the filter, smoother and statistics, allocated once and reused across
+/// calls (and EM iterations): no allocation per time step.
+#[derive(Debug, Clone, Default)]
+pub struct KalmanWorkspace {
+    pre: Vec<f64>,
+    ld: usize,
+    qr: QrScratch,
+    observed: Vec<usize>,
+    eps: Vec<f64>,
+    x_pred: Vec<f64>,
+    u_pred: Vec<f64>,
+    x_next: Vec<f64>,
+    pub(crate) filter: FilterOutput,
+    pub(crate) smoother: crate::SmootherOutput,
+    pub(crate) scratch: Vec<f64>,
+}
+
+impl KalmanWorkspace {
+    /// An empty workspace; buffers grow on first use.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Log-likelihood of one record, by the square-root filter without storage.
+    ///
+    /// # Errors
+    /// Invalid record ([`Record::validate`]) or a singular innovation covariance.
+    pub fn loglik(&mut self, model: &LinearGaussianModel, record: &Record) -> Result<f64> {
+        record.validate(model, 0)?;
+        self.run(model, record, 0, Keep::LoglikOnly)
+    }
+
+    /// Square-root filter pass over one record, keeping what the smoother needs.
+    pub fn filter(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+    ) -> Result<&FilterOutput> {
+        record.validate(model, 0)?;
+        self.run(model, record, 0, Keep::SmootherInputs)?;
+        Ok(&self.filter)
+    }
+
+    fn prepare(&mut self, model: &LinearGaussianModel, t_len: usize, keep: Keep) {
+        let (n, p) = (model.n(), model.p());
+        let rows = n + model.noise_factor().nrows();
+        let cols = p + 2 * n;
+        self.ld = rows.max(cols);
+        self.pre.resize(self.ld * cols, 0.0);
+        self.eps.resize(p, 0.0);
+        self.x_pred.resize(n, 0.0);
+        self.u_pred.resize(n * n, 0.0);
+        self.x_next.resize(n, 0.0);
+        self.observed.reserve(p);
+        let f = &mut self.filter;
+        f.n = n;
+        f.t_len = t_len;
+        if keep == Keep::SmootherInputs {
+            f.pred_mean.resize((t_len + 1) * n, 0.0);
+            f.pred_factor.resize((t_len + 1) * n * n, 0.0);
+            f.filt_mean.resize(t_len * n, 0.0);
+            f.gain_t.resize(t_len * n * n, 0.0);
+            f.cond_factor.resize(t_len * n * n, 0.0);
+        }
+    }
+
+    /// The forward pass. `record_index` only labels errors.
+    pub(crate) fn run(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        record_index: usize,
+        keep: Keep,
+    ) -> Result<f64> {
+        let (n, p, m) = (model.n(), model.p(), model.m());
+        let t_len = record.len();
+        self.prepare(model, t_len, keep);
+        let store = keep == Keep::SmootherInputs;
+        let nn = n * n;
+        let ld = self.ld;
+        let l = model.noise_factor();
+        let ell = l.nrows();
+        let rows = n + ell;
+        let (a, b, c, d, h) = (model.a(), model.b(), model.c(), model.d(), model.h());
+        self.x_pred.copy_from_slice(model.mu().as_slice());
+        self.u_pred
+            .copy_from_slice(model.initial_factor().as_slice());
+        let mut triangular = false;
+        if store {
+            self.filter.pred_mean[..n].copy_from_slice(&self.x_pred);
+            self.filter.pred_factor[..nn].copy_from_slice(&self.u_pred);
+        }
+        let mut loglik = 0.0;
+        for t in 0..t_len {
+            let y_t = record.y.column(t);
+            let u_t = record.u.column(t);
+            self.observed.clear();
+            self.observed.extend((0..p).filter(|&i| !y_t[i].is_nan()));
+            let po = self.observed.len();
+            let cols = po + n + if store { n } else { 0 };
+            // ---- pre-array [[U C_o', U A', U], [L_e,o, L_w, 0]] ----
+            let pre = &mut self.pre;
+            let u = &self.u_pred;
+            for (j, &oi) in self.observed.iter().enumerate() {
+                let col = &mut pre[j * ld..j * ld + rows];
+                for i in 0..n {
+                    let k0 = if triangular { i } else { 0 };
+                    col[i] = (k0..n).map(|k| u[k * n + i] * c[(oi, k)]).sum();
+                }
+                for i in 0..ell {
+                    col[n + i] = l[(i, n + oi)];
+                }
+            }
+            for j in 0..n {
+                let col = &mut pre[(po + j) * ld..(po + j) * ld + rows];
+                for i in 0..n {
+                    let k0 = if triangular { i } else { 0 };
+                    col[i] = (k0..n).map(|k| u[k * n + i] * a[(j, k)]).sum();
+                }
+                for i in 0..ell {
+                    col[n + i] = l[(i, j)];
+                }
+            }
+            if store {
+                for j in 0..n {
+                    let col = &mut pre[(po + n + j) * ld..(po + n + j) * ld + rows];
+                    col[..n].copy_from_slice(&u[j * n..(j + 1) * n]);
+                    col[n..].fill(0.0);
+                }
+            }
+            triangularize(pre, ld, rows, cols, &mut self.qr);
+            // ---- innovation, whitened by X11' ----
+            let mut quad = 0.0;
+            let mut half_logdet = 0.0;
+            for (j, &oi) in self.observed.iter().enumerate() {
+                let mut e = y_t[oi] - h[oi];
+                for k in 0..n {
+                    e -= c[(oi, k)] * self.x_pred[k];
+                }
+                for k in 0..m {
+                    e -= d[(oi, k)] * u_t[k];
+                }
+                for k in 0..j {
+                    e -= pre[j * ld + k] * self.eps[k];
+                }
+                let diag = pre[j * ld + j];
+                if diag == 0.0 {
+                    return Err(KalmanError::SingularInnovation {
+                        record: record_index,
+                        time: t + 1,
+                        output: oi + 1,
+                    });
+                }
+                let w = e / diag;
+                self.eps[j] = w;
+                quad += w * w;
+                half_logdet += diag.ln();
+            }
+            loglik += -0.5 * (po as f64) * LN_2PI - half_logdet - 0.5 * quad;
+            // ---- x_{t+1|t} = A x + B u + X12' eps ----
+            for i in 0..n {
+                let mut v: f64 = (0..n).map(|k| a[(i, k)] * self.x_pred[k]).sum();
+                v += (0..m).map(|k| b[(i, k)] * u_t[k]).sum::<f64>();
+                let x12 = &pre[(po + i) * ld..(po + i) * ld + po];
+                v += x12
+                    .iter()
+                    .zip(&self.eps[..po])
+                    .map(|(x, e)| x * e)
+                    .sum::<f64>();
+                self.x_next[i] = v;
+            }
+            if store {
+                let f = &mut self.filter;
+                // x_{t|t} = x_{t|t-1} + X13' eps
+                for i in 0..n {
+                    let x13 = &pre[(po + n + i) * ld..(po + n + i) * ld + po];
+                    f.filt_mean[t * n + i] = self.x_pred[i]
+                        + x13
+                            .iter()
+                            .zip(&self.eps[..po])
+                            .map(|(x, e)| x * e)
+                            .sum::<f64>();
+                }
+                // J' = X22^{-1} X23, and X33
+                let gain = &mut f.gain_t[t * nn..(t + 1) * nn];
+                let cond = &mut f.cond_factor[t * nn..(t + 1) * nn];
+                for j in 0..n {
+                    let src = (po + n + j) * ld;
+                    gain[j * n..(j + 1) * n].copy_from_slice(&pre[src + po..src + po + n]);
+                    cond[j * n..(j + 1) * n].copy_from_slice(&pre[src + po + n..src + po + 2 * n]);
+                }
+                solve_upper(&pre[po * ld + po..], ld, n, gain, n, n);
+            }
+            // ---- U_{t+1|t} = X22 ----
+            for j in 0..n {
+                let src = (po + j) * ld + po;
+                self.u_pred[j * n..(j + 1) * n].copy_from_slice(&pre[src..src + n]);
+            }
+            triangular = true;
+            std::mem::swap(&mut self.x_pred, &mut self.x_next);
+            if store {
+                let f = &mut self.filter;
+                f.pred_mean[(t + 1) * n..(t + 2) * n].copy_from_slice(&self.x_pred);
+                f.pred_factor[(t + 1) * nn..(t + 2) * nn].copy_from_slice(&self.u_pred);
+            }
+        }
+        self.filter.loglik = loglik;
+        Ok(loglik)
+    }
+}

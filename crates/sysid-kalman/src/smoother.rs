@@ -1,0 +1,330 @@
+//! The Rauch-Tung-Striebel smoother with lag-one covariances, and the EM statistics.
+
+use crate::filter::Keep;
+use crate::{KalmanWorkspace, LinearGaussianModel, Record, Result, SufficientStatistics, dense};
+use nalgebra::{DMatrix, DVector, DVectorView};
+
+/// Smoothed moments of one record. Index `k = 0..=T` is time `t = k + 1`
+/// (`k = T` is `x_{T+1}` given all data).
+#[derive(Debug, Clone, Default)]
+pub struct SmootherOutput {
+    pub(crate) n: usize,
+    pub(crate) t_len: usize,
+    pub(crate) loglik: f64,
+    pub(crate) mean: Vec<f64>,
+    pub(crate) cov: Vec<f64>,
+    pub(crate) lag_one: Vec<f64>,
+}
+
+impl SmootherOutput {
+    /// Log-likelihood of the record (from the forward pass).
+    pub fn loglik(&self) -> f64 {
+        self.loglik
+    }
+    /// Number of time steps `T`.
+    pub fn len(&self) -> usize {
+        self.t_len
+    }
+    /// Whether the record was empty.
+    pub fn is_empty(&self) -> bool {
+        self.t_len == 0
+    }
+    /// Smoothed mean `x_{k+1|T}`, `k` in `0..=T`.
+    pub fn mean(&self, k: usize) -> DVectorView<'_, f64> {
+        DVectorView::from_slice(&self.mean[k * self.n..(k + 1) * self.n], self.n)
+    }
+    /// Smoothed covariance `P_{k+1|T}`, `k` in `0..=T`.
+    pub fn covariance(&self, k: usize) -> DMatrix<f64> {
+        let nn = self.n * self.n;
+        DMatrix::from_column_slice(self.n, self.n, &self.cov[k * nn..(k + 1) * nn])
+    }
+    /// Lag-one covariance `M_{k+1|T} = Cov(x_{k+2}, x_{k+1} | y_{1:T})`, `k` in `0..T`.
+    pub fn lag_one_covariance(&self, k: usize) -> DMatrix<f64> {
+        let nn = self.n * self.n;
+        DMatrix::from_column_slice(self.n, self.n, &self.lag_one[k * nn..(k + 1) * nn])
+    }
+}
+
+impl KalmanWorkspace {
+    /// Square-root filter and RTS smoother over one record.
+    ///
+    /// # Model
+    /// See [`LinearGaussianModel`]; missing outputs are NaN entries.
+    ///
+    /// # Algorithm
+    /// The forward pass triangularises, at every step, the pre-array
+    /// `[[U C_o', U A', U], [L_{e,o}, L_w, 0]]` (U'U = P_{t|t-1}, L'L = [[Q, S], [S', R]],
+    /// `o` the observed outputs). The resulting factor
+    /// `[[X11, X12, X13], [0, X22, X23], [0, 0, X33]]` is the Cholesky factor of the
+    /// covariance of `(y_t, x_{t+1}, x_t)` given `y_{1:t-1}`, so it contains the
+    /// innovation factor (X11), the predicted factor `U_{t+1|t} = X22`, the smoother gain
+    /// `J_t = X23' X22^{-T}` and the factor of `Cov(x_t | y_{1:t}, x_{t+1}) = X33'X33`;
+    /// correlated noise (`S != 0`) and missing entries need no special case. The
+    /// backward pass is
+    /// ```text
+    /// x_{t|T} = x_{t|t} + J_t (x_{t+1|T} - x_{t+1|t})
+    /// P_{t|T} = X33'X33 + J_t P_{t+1|T} J_t'       (a sum of PSD terms)
+    /// M_{t|T} = Cov(x_{t+1}, x_t | y) = P_{t+1|T} J_t'
+    /// ```
+    ///
+    /// # Complexity
+    /// `O(T (n + p)^3)` time, `O(T n^2)` memory, no allocation per step once the
+    /// workspace has grown.
+    ///
+    /// # References
+    /// Rauch, Tung, Striebel (1965); Kailath, Sayed, Hassibi, *Linear Estimation* (2000),
+    /// array algorithms; Gibson and Ninness (2005).
+    pub fn smooth(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+    ) -> Result<&SmootherOutput> {
+        record.validate(model, 0)?;
+        self.smooth_record(model, record, 0, None)?;
+        Ok(&self.smoother)
+    }
+
+    /// Smooths one record and adds its EM statistics to `stats`; returns its
+    /// log-likelihood. `record_index` labels errors.
+    pub fn accumulate_statistics(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        record_index: usize,
+        stats: &mut SufficientStatistics,
+    ) -> Result<f64> {
+        record.validate(model, record_index)?;
+        self.smooth_record(model, record, record_index, Some(stats))
+    }
+
+    pub(crate) fn smooth_record(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        record_index: usize,
+        mut stats: Option<&mut SufficientStatistics>,
+    ) -> Result<f64> {
+        let loglik = self.run(model, record, record_index, Keep::SmootherInputs)?;
+        let n = model.n();
+        let nn = n * n;
+        let t_len = record.len();
+        let f = &self.filter;
+        let s = &mut self.smoother;
+        s.n = n;
+        s.t_len = t_len;
+        s.loglik = loglik;
+        s.mean.resize((t_len + 1) * n, 0.0);
+        s.cov.resize((t_len + 1) * nn, 0.0);
+        s.lag_one.resize(t_len * nn, 0.0);
+        s.mean[t_len * n..].copy_from_slice(&f.pred_mean[t_len * n..]);
+        {
+            let u = &f.pred_factor[t_len * nn..];
+            dense::mul_tn(&mut s.cov[t_len * nn..], u, u, n, n, n, false);
+        }
+        let mut diff = vec![0.0; n];
+        for t in (0..t_len).rev() {
+            let jt = &f.gain_t[t * nn..(t + 1) * nn];
+            for i in 0..n {
+                diff[i] = s.mean[(t + 1) * n + i] - f.pred_mean[(t + 1) * n + i];
+            }
+            for i in 0..n {
+                let dot: f64 = jt[i * n..(i + 1) * n]
+                    .iter()
+                    .zip(&diff)
+                    .map(|(a, b)| a * b)
+                    .sum();
+                s.mean[t * n + i] = f.filt_mean[t * n + i] + dot;
+            }
+            let (head, tail) = s.cov.split_at_mut((t + 1) * nn);
+            let p_next = &tail[..nn];
+            let p_t = &mut head[t * nn..];
+            let lag = &mut s.lag_one[t * nn..(t + 1) * nn];
+            dense::mul_nn(lag, p_next, jt, n, n, n);
+            let x33 = &f.cond_factor[t * nn..(t + 1) * nn];
+            dense::mul_tn(p_t, x33, x33, n, n, n, false);
+            dense::mul_tn(p_t, jt, lag, n, n, n, true);
+            dense::symmetrize(p_t, n);
+        }
+        if let Some(stats) = stats.as_deref_mut() {
+            add_statistics(model, record, &self.smoother, &mut self.scratch, stats);
+        }
+        Ok(loglik)
+    }
+}
+
+/// Adds the conditional moments of every `c_t = [x_t; u_t; 1; x_{t+1}; y_t]`.
+fn add_statistics(
+    model: &LinearGaussianModel,
+    record: &Record,
+    sm: &SmootherOutput,
+    scratch: &mut Vec<f64>,
+    stats: &mut SufficientStatistics,
+) {
+    let (n, m, p) = (model.n(), model.m(), model.p());
+    let nn = n * n;
+    let dim = stats.dim();
+    let (ox, ou, o1, oxn, oy) = (0, n, n + m, n + m + 1, 2 * n + m + 1);
+    scratch.clear();
+    scratch.resize(dim + dim * dim, 0.0);
+    let (mean, cov) = scratch.split_at_mut(dim);
+    stats.observe_initial(&sm.mean[..n], &sm.cov[..nn]);
+    for t in 0..record.len() {
+        // means
+        mean[ox..ox + n].copy_from_slice(&sm.mean[t * n..(t + 1) * n]);
+        mean[ou..ou + m].copy_from_slice(record.u.column(t).as_slice());
+        mean[o1] = 1.0;
+        mean[oxn..oxn + n].copy_from_slice(&sm.mean[(t + 1) * n..(t + 2) * n]);
+        let y_t = record.y.column(t);
+        // covariance blocks of (x_t, x_{t+1})
+        let p_t = &sm.cov[t * nn..(t + 1) * nn];
+        let p_next = &sm.cov[(t + 1) * nn..(t + 2) * nn];
+        let lag = &sm.lag_one[t * nn..(t + 1) * nn];
+        for j in 0..n {
+            for i in 0..n {
+                cov[(ox + j) * dim + ox + i] = p_t[j * n + i];
+                cov[(oxn + j) * dim + oxn + i] = p_next[j * n + i];
+                cov[(ox + j) * dim + oxn + i] = lag[j * n + i]; // Cov(x_{t+1,i}, x_{t,j})
+                cov[(oxn + j) * dim + ox + i] = lag[i * n + j];
+            }
+        }
+        let any_missing = y_t.iter().any(|v| v.is_nan());
+        if !any_missing {
+            mean[oy..oy + p].copy_from_slice(y_t.as_slice());
+            stats.observe_step(mean, cov);
+            continue;
+        }
+        // missing outputs: exact conditional moments through (x_t, x_{t+1})
+        let cond = missing_output_conditional(model, record.u.column(t).as_slice(), y_t.as_slice());
+        let mut joint = DMatrix::zeros(2 * n, 2 * n);
+        let mut xs = DVector::zeros(2 * n);
+        for j in 0..2 * n {
+            let cj = if j < n { ox + j } else { oxn + j - n };
+            xs[j] = mean[cj];
+            for i in 0..2 * n {
+                let ci = if i < n { ox + i } else { oxn + i - n };
+                joint[(i, j)] = cov[cj * dim + ci];
+            }
+        }
+        let y_mean = &cond.gain * &xs + &cond.offset;
+        let cross = &cond.gain * &joint; // Cov(y_mis, (x_t, x_{t+1}))
+        let y_cov = &cross * cond.gain.transpose() + &cond.residual_cov;
+        for i in 0..p {
+            mean[oy + i] = y_t[i];
+        }
+        for (a, &yi) in cond.missing.iter().enumerate() {
+            mean[oy + yi] = y_mean[a];
+            for j in 0..2 * n {
+                let cj = if j < n { ox + j } else { oxn + j - n };
+                cov[cj * dim + oy + yi] = cross[(a, j)];
+                cov[(oy + yi) * dim + cj] = cross[(a, j)];
+            }
+            for (b, &yk) in cond.missing.iter().enumerate() {
+                cov[(oy + yk) * dim + oy + yi] = y_cov[(a, b)];
+            }
+        }
+        stats.observe_step(mean, cov);
+        // clear the y blocks for the next step
+        for &yi in &cond.missing {
+            for j in 0..dim {
+                cov[j * dim + oy + yi] = 0.0;
+                cov[(oy + yi) * dim + j] = 0.0;
+            }
+        }
+    }
+}
+
+/// `y_mis = gain [x_t; x_{t+1}] + offset + nu`, `nu ~ N(0, residual_cov)` independent
+/// of the states and the observed data.
+struct MissingConditional {
+    missing: Vec<usize>,
+    gain: DMatrix<f64>,
+    offset: DVector<f64>,
+    residual_cov: DMatrix<f64>,
+}
+
+/// Conditional law of the missing outputs of one step given `(x_t, x_{t+1})` and the
+/// observed outputs of that step: with `ebar = [w_t; e_o]`,
+/// `e_mis = G ebar + nu`, `G = Cov(e_mis, ebar) Cov(ebar)^+`, and
+/// `w_t = x_{t+1} - A x_t - B u_t`, `e_o = y_o - C_o x_t - D_o u_t - h_o`.
+/// Allocates: used only at steps with missing entries.
+fn missing_output_conditional(
+    model: &LinearGaussianModel,
+    u: &[f64],
+    y: &[f64],
+) -> MissingConditional {
+    let (n, p) = (model.n(), model.p());
+    let observed: Vec<usize> = (0..p).filter(|&i| !y[i].is_nan()).collect();
+    let missing: Vec<usize> = (0..p).filter(|&i| y[i].is_nan()).collect();
+    let (a, b, c, d, q, r, s, h) = (
+        model.a(),
+        model.b(),
+        model.c(),
+        model.d(),
+        model.q(),
+        model.r(),
+        model.s(),
+        model.h(),
+    );
+    let no = observed.len();
+    let k = n + no;
+    // Cov(ebar) and Cov(e_mis, ebar)
+    let mut var_bar = DMatrix::zeros(k, k);
+    var_bar.view_mut((0, 0), (n, n)).copy_from(q);
+    for (jj, &oj) in observed.iter().enumerate() {
+        for i in 0..n {
+            var_bar[(i, n + jj)] = s[(i, oj)];
+            var_bar[(n + jj, i)] = s[(i, oj)];
+        }
+        for (ii, &oi) in observed.iter().enumerate() {
+            var_bar[(n + ii, n + jj)] = r[(oi, oj)];
+        }
+    }
+    let nm = missing.len();
+    let mut cov_mb = DMatrix::zeros(nm, k);
+    for (a_i, &mi) in missing.iter().enumerate() {
+        for i in 0..n {
+            cov_mb[(a_i, i)] = s[(i, mi)];
+        }
+        for (jj, &oj) in observed.iter().enumerate() {
+            cov_mb[(a_i, n + jj)] = r[(mi, oj)];
+        }
+    }
+    let scale = var_bar.amax().max(f64::MIN_POSITIVE);
+    let g = if cov_mb.amax() == 0.0 {
+        DMatrix::zeros(nm, k)
+    } else {
+        let pinv = var_bar
+            .clone()
+            .pseudo_inverse(1e-12 * scale)
+            .unwrap_or_else(|_| DMatrix::zeros(k, k));
+        &cov_mb * pinv
+    };
+    let mut residual_cov = DMatrix::zeros(nm, nm);
+    for (a_i, &mi) in missing.iter().enumerate() {
+        for (b_i, &mk) in missing.iter().enumerate() {
+            residual_cov[(a_i, b_i)] = r[(mi, mk)];
+        }
+    }
+    residual_cov -= &g * cov_mb.transpose();
+    sysid_linalg::symmetrize(&mut residual_cov);
+    let g_w = g.columns(0, n);
+    let g_o = g.columns(n, no);
+    let c_o = DMatrix::from_fn(no, n, |i, j| c[(observed[i], j)]);
+    let c_m = DMatrix::from_fn(nm, n, |i, j| c[(missing[i], j)]);
+    let mut gain = DMatrix::zeros(nm, 2 * n);
+    gain.columns_mut(0, n)
+        .copy_from(&(c_m - &g_w * a - &g_o * &c_o));
+    gain.columns_mut(n, n).copy_from(&g_w);
+    let u = DVector::from_column_slice(u);
+    let du = d * &u;
+    let bu = b * &u;
+    let resid_o = DVector::from_fn(no, |i, _| y[observed[i]] - du[observed[i]] - h[observed[i]]);
+    let offset =
+        DVector::from_fn(nm, |i, _| du[missing[i]] + h[missing[i]]) - &g_w * bu + &g_o * resid_o;
+    MissingConditional {
+        missing,
+        gain,
+        offset,
+        residual_cov,
+    }
+}

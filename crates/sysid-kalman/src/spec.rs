@@ -1,0 +1,113 @@
+//! A serialisable description of a [`LinearGaussianModel`] (the JSON model file).
+
+use crate::{KalmanError, LinearGaussianModel, Result};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// Plain-data form of a model: matrices as arrays of rows, vectors as arrays.
+/// Optional entries default as in [`LinearGaussianModel::builder`].
+/// The JSON schema is documented in `docs/model-format.md`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// `A`, n x n.
+    pub a: Vec<Vec<f64>>,
+    /// `B`, n x m (absent: no inputs, or zero when `d` is given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub b: Option<Vec<Vec<f64>>>,
+    /// `C`, p x n.
+    pub c: Vec<Vec<f64>>,
+    /// `D`, p x m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub d: Option<Vec<Vec<f64>>>,
+    /// `Q`, n x n.
+    pub q: Vec<Vec<f64>>,
+    /// `R`, p x p.
+    pub r: Vec<Vec<f64>>,
+    /// `S`, n x p.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub s: Option<Vec<Vec<f64>>>,
+    /// `h`, p.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub h: Option<Vec<f64>>,
+    /// `mu`, n.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mu: Option<Vec<f64>>,
+    /// `P1`, n x n.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p1: Option<Vec<Vec<f64>>>,
+}
+
+fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| m.row(i).iter().copied().collect())
+        .collect()
+}
+
+fn matrix(name: &str, rows: &[Vec<f64>]) -> Result<DMatrix<f64>> {
+    let ncols = rows.first().map_or(0, Vec::len);
+    for (i, row) in rows.iter().enumerate() {
+        if row.len() != ncols {
+            return Err(KalmanError::Dimension {
+                name: format!("{name} (row {})", i + 1),
+                expected_rows: rows.len(),
+                expected_cols: ncols,
+                rows: rows.len(),
+                cols: row.len(),
+            });
+        }
+    }
+    Ok(DMatrix::from_fn(rows.len(), ncols, |i, j| rows[i][j]))
+}
+
+impl ModelSpec {
+    /// The spec of a model (every matrix written out, `B`/`D` omitted without inputs).
+    pub fn from_model(model: &LinearGaussianModel) -> Self {
+        let has_inputs = model.m() > 0;
+        ModelSpec {
+            a: rows_of(model.a()),
+            b: has_inputs.then(|| rows_of(model.b())),
+            c: rows_of(model.c()),
+            d: has_inputs.then(|| rows_of(model.d())),
+            q: rows_of(model.q()),
+            r: rows_of(model.r()),
+            s: model.has_cross_covariance().then(|| rows_of(model.s())),
+            h: model
+                .h()
+                .iter()
+                .any(|&v| v != 0.0)
+                .then(|| model.h().iter().copied().collect()),
+            mu: Some(model.mu().iter().copied().collect()),
+            p1: Some(rows_of(model.p1())),
+        }
+    }
+
+    /// Validates the spec and builds the model (see [`crate::ModelBuilder::build`]).
+    pub fn build(&self) -> Result<LinearGaussianModel> {
+        let mut builder = LinearGaussianModel::builder(
+            matrix("A", &self.a)?,
+            matrix("C", &self.c)?,
+            matrix("Q", &self.q)?,
+            matrix("R", &self.r)?,
+        );
+        if let Some(b) = &self.b {
+            builder = builder.b(matrix("B", b)?);
+        }
+        if let Some(d) = &self.d {
+            builder = builder.d(matrix("D", d)?);
+        }
+        if let Some(s) = &self.s {
+            builder = builder.s(matrix("S", s)?);
+        }
+        if let Some(h) = &self.h {
+            builder = builder.h(DVector::from_column_slice(h));
+        }
+        if let Some(mu) = &self.mu {
+            builder = builder.mu(DVector::from_column_slice(mu));
+        }
+        if let Some(p1) = &self.p1 {
+            builder = builder.p1(matrix("P1", p1)?);
+        }
+        builder.build()
+    }
+}

@@ -1,1 +1,32 @@
-//! placeholder
+//! `sysid`: identification of dynamic systems from data.
+//!
+//! This facade re-exports the layers:
+//!
+//! * [`linalg`]: small dense kernels (Cholesky with typed errors, QR triangularisation);
+//! * [`kalman`]: linear Gaussian state-space models: simulation, square-root Kalman
+//!   filter, RTS smoother with lag-one covariances, exact log-likelihood with missing
+//!   data, EM sufficient statistics;
+//! * [`models`]: the canonical systems of the source papers.
+//!
+//! # Example
+//! ```
+//! use sysid::prelude::*;
+//! let sim = System::Lgss.simulate(500, 42).unwrap();
+//! let model = System::Lgss.model();
+//! let mut ws = KalmanWorkspace::new();
+//! let loglik = ws.loglik(&model, &sim.record).unwrap();
+//! assert!(loglik.is_finite());
+//! ```
+
+pub use sysid_kalman as kalman;
+pub use sysid_linalg as linalg;
+pub use sysid_models as models;
+
+/// The names most programs need.
+pub mod prelude {
+    pub use crate::kalman::{
+        KalmanError, KalmanWorkspace, LinearGaussianModel, ModelSpec, Record, SmootherOutput,
+        SufficientStatistics,
+    };
+    pub use crate::models::System;
+}

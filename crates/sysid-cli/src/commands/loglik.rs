@@ -1,0 +1,24 @@
+use super::{in_data, model_and_data};
+use crate::DataArgs;
+use crate::error::CliError;
+use std::path::Path;
+use sysid::kalman::KalmanWorkspace;
+
+pub fn run(model_path: &Path, data: &DataArgs, json: bool) -> Result<(), CliError> {
+    let (model, file) = model_and_data(model_path, data)?;
+    let loglik = KalmanWorkspace::new()
+        .loglik(&model, &file.record)
+        .map_err(in_data(&data.data))?;
+    let observed = file.record.y.iter().filter(|v| !v.is_nan()).count();
+    if json {
+        let out = serde_json::json!({
+            "command": "loglik", "loglik": loglik, "steps": file.record.len(),
+            "observed_values": observed, "missing_values": file.record.y.len() - observed,
+            "outputs": file.output_names, "inputs": file.input_names,
+        });
+        println!("{out}");
+    } else {
+        println!("{loglik}");
+    }
+    Ok(())
+}

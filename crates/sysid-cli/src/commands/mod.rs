@@ -1,0 +1,47 @@
+//! One module per subcommand.
+
+pub mod loglik;
+pub mod simulate;
+pub mod smooth;
+
+use crate::DataArgs;
+use crate::error::CliError;
+use crate::files::{ColumnChoice, DataFile, read_data, read_model};
+use std::path::Path;
+use sysid::kalman::LinearGaussianModel;
+
+/// Reads a model and a data file and checks that their columns match.
+pub fn model_and_data(
+    model: &Path,
+    data: &DataArgs,
+) -> Result<(LinearGaussianModel, DataFile), CliError> {
+    let model = read_model(model)?;
+    let file = read_data(
+        &data.data,
+        &ColumnChoice {
+            inputs: data.inputs.clone(),
+            outputs: data.outputs.clone(),
+        },
+    )?;
+    for (what, found, expected) in [
+        ("input", file.input_names.len(), model.m()),
+        ("output", file.output_names.len(), model.p()),
+    ] {
+        if found != expected {
+            return Err(CliError::ColumnCount {
+                what,
+                found,
+                expected,
+            });
+        }
+    }
+    Ok((model, file))
+}
+
+/// Wraps a Kalman error with the data file it concerns.
+pub fn in_data(data: &Path) -> impl Fn(sysid::kalman::KalmanError) -> CliError + '_ {
+    move |source| CliError::Kalman {
+        context: data.display().to_string(),
+        source,
+    }
+}

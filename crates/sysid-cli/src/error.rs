@@ -1,0 +1,71 @@
+use std::path::PathBuf;
+use sysid::kalman::KalmanError;
+use thiserror::Error;
+
+/// Everything the command line can report; each message names the place.
+#[derive(Debug, Error)]
+pub enum CliError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: refusing to overwrite an existing file (use --force)")]
+    WouldOverwrite { path: PathBuf },
+    #[error("{path}: the file is empty (expected a header line)")]
+    EmptyFile { path: PathBuf },
+    #[error("{path}: no data rows after the header")]
+    NoRows { path: PathBuf },
+    #[error("{path}, line {line}: expected {expected} fields as in the header, found {found}")]
+    Ragged {
+        path: PathBuf,
+        line: u64,
+        expected: usize,
+        found: usize,
+    },
+    #[error("{path}, line {line}, column {column}: cannot read {value:?} as a number")]
+    NotANumber {
+        path: PathBuf,
+        line: u64,
+        column: String,
+        value: String,
+    },
+    #[error("{path}, line {line}, column {column}: {value} is not allowed in {role} columns")]
+    NotAllowed {
+        path: PathBuf,
+        line: u64,
+        column: String,
+        value: String,
+        role: &'static str,
+    },
+    #[error("{path}: no column named {column:?} (columns are: {available})")]
+    UnknownColumn {
+        path: PathBuf,
+        column: String,
+        available: String,
+    },
+    #[error("{path}: {message}")]
+    Csv { path: PathBuf, message: String },
+    #[error("{path}, line {line}, column {column}: invalid model JSON: {message}")]
+    Json {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("{path}: {source}")]
+    Model { path: PathBuf, source: KalmanError },
+    #[error("{context}: {source}")]
+    Kalman {
+        context: String,
+        source: KalmanError,
+    },
+    #[error("unknown system {name:?} (known: {known})")]
+    UnknownSystem { name: String, known: String },
+    #[error("the data have {found} {what} columns but the model has {expected}")]
+    ColumnCount {
+        what: &'static str,
+        found: usize,
+        expected: usize,
+    },
+}

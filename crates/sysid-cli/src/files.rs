@@ -1,0 +1,232 @@
+//! Reading data CSV and model JSON, and writing outputs without clobbering files.
+
+use crate::error::CliError;
+use nalgebra::DMatrix;
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use sysid::kalman::{LinearGaussianModel, ModelSpec, Record};
+
+/// Opens `path` for writing; refuses to replace an existing file unless `force`.
+pub fn create_output(path: &Path, force: bool) -> Result<BufWriter<File>, CliError> {
+    let mut options = OpenOptions::new();
+    options.write(true);
+    if force {
+        options.create(true).truncate(true);
+    } else {
+        options.create_new(true);
+    }
+    options.open(path).map(BufWriter::new).map_err(|source| {
+        if source.kind() == std::io::ErrorKind::AlreadyExists {
+            CliError::WouldOverwrite {
+                path: path.to_path_buf(),
+            }
+        } else {
+            CliError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        }
+    })
+}
+
+/// Writes `contents` through [`create_output`].
+pub fn write_output(path: &Path, force: bool, contents: &str) -> Result<(), CliError> {
+    let mut w = create_output(path, force)?;
+    w.write_all(contents.as_bytes())
+        .and_then(|_| w.flush())
+        .map_err(|source| CliError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+/// Reads and validates a model file (JSON, `docs/model-format.md`).
+pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let spec: ModelSpec = serde_json::from_str(&text).map_err(|e| CliError::Json {
+        path: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        message: e
+            .to_string()
+            .split(" at line")
+            .next()
+            .unwrap_or_default()
+            .to_string(),
+    })?;
+    spec.build().map_err(|source| CliError::Model {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Which columns of a data file are inputs and outputs.
+#[derive(Debug, Clone, Default)]
+pub struct ColumnChoice {
+    /// Input column names; `None` means every column whose name starts with `u`.
+    pub inputs: Option<Vec<String>>,
+    /// Output column names; `None` means every column whose name starts with `y`.
+    pub outputs: Option<Vec<String>>,
+}
+
+/// A data file read into a record, with its time column if it has one.
+#[derive(Debug, Clone)]
+pub struct DataFile {
+    pub record: Record,
+    pub input_names: Vec<String>,
+    pub output_names: Vec<String>,
+    pub time: Vec<f64>,
+}
+
+fn is_missing(field: &str) -> bool {
+    matches!(field, "" | "NaN" | "nan" | "NA" | "na")
+}
+
+fn select(
+    path: &Path,
+    header: &[String],
+    chosen: &Option<Vec<String>>,
+    prefix: char,
+) -> Result<Vec<usize>, CliError> {
+    match chosen {
+        None => Ok((0..header.len())
+            .filter(|&i| {
+                let h = &header[i];
+                h.starts_with(prefix) && h[1..].chars().all(|c| c.is_ascii_digit()) && h.len() > 1
+            })
+            .collect()),
+        Some(names) => names
+            .iter()
+            .map(|name| {
+                header
+                    .iter()
+                    .position(|h| h == name)
+                    .ok_or_else(|| CliError::UnknownColumn {
+                        path: path.to_path_buf(),
+                        column: name.clone(),
+                        available: header.join(", "),
+                    })
+            })
+            .collect(),
+    }
+}
+
+/// Reads a CSV data file with a header. Output cells that are empty, `NaN` or `NA` are
+/// missing; input cells must be finite numbers. Errors name the file, the line
+/// (1-based, the header is line 1) and the column.
+pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliError> {
+    let file = File::open(path).map_err(|source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(file);
+    let csv_err = |e: csv::Error| CliError::Csv {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let mut rows = reader.records();
+    let header: Vec<String> = match rows.next() {
+        None => {
+            return Err(CliError::EmptyFile {
+                path: path.to_path_buf(),
+            });
+        }
+        Some(r) => r.map_err(csv_err)?.iter().map(str::to_string).collect(),
+    };
+    if header.iter().all(String::is_empty) {
+        return Err(CliError::EmptyFile {
+            path: path.to_path_buf(),
+        });
+    }
+    let input_cols = select(path, &header, &choice.inputs, 'u')?;
+    let output_cols = select(path, &header, &choice.outputs, 'y')?;
+    let time_col = header.iter().position(|h| h == "t");
+    let (mut u, mut y, mut time) = (Vec::new(), Vec::new(), Vec::new());
+    for row in rows {
+        let row = row.map_err(csv_err)?;
+        let line = row.position().map_or(0, |p| p.line());
+        if row.len() == 1 && row[0].is_empty() {
+            continue; // blank line
+        }
+        if row.len() != header.len() {
+            return Err(CliError::Ragged {
+                path: path.to_path_buf(),
+                line,
+                expected: header.len(),
+                found: row.len(),
+            });
+        }
+        let number =
+            |col: usize, role: &'static str, allow_missing: bool| -> Result<f64, CliError> {
+                let field = &row[col];
+                if allow_missing && is_missing(field) {
+                    return Ok(f64::NAN);
+                }
+                let value: f64 = field.parse().map_err(|_| CliError::NotANumber {
+                    path: path.to_path_buf(),
+                    line,
+                    column: header[col].clone(),
+                    value: field.to_string(),
+                })?;
+                if !value.is_finite() {
+                    return Err(CliError::NotAllowed {
+                        path: path.to_path_buf(),
+                        line,
+                        column: header[col].clone(),
+                        value: field.to_string(),
+                        role,
+                    });
+                }
+                Ok(value)
+            };
+        for &c in &input_cols {
+            u.push(number(c, "input", false)?);
+        }
+        for &c in &output_cols {
+            y.push(number(c, "output", true)?);
+        }
+        if let Some(c) = time_col {
+            time.push(number(c, "time", false)?);
+        }
+    }
+    let steps = if output_cols.is_empty() {
+        u.len() / input_cols.len().max(1)
+    } else {
+        y.len() / output_cols.len()
+    };
+    if steps == 0 {
+        return Err(CliError::NoRows {
+            path: path.to_path_buf(),
+        });
+    }
+    if time.is_empty() {
+        time = (1..=steps).map(|t| t as f64).collect();
+    }
+    let name = |cols: &[usize]| cols.iter().map(|&c| header[c].clone()).collect();
+    Ok(DataFile {
+        record: Record::new(
+            DMatrix::from_vec(input_cols.len(), steps, u),
+            DMatrix::from_vec(output_cols.len(), steps, y),
+        ),
+        input_names: name(&input_cols),
+        output_names: name(&output_cols),
+        time,
+    })
+}
+
+/// Formats a float for CSV: shortest round-trip representation, `NaN` for missing.
+pub fn fmt(v: f64) -> String {
+    if v.is_nan() {
+        "NaN".to_string()
+    } else {
+        format!("{v}")
+    }
+}

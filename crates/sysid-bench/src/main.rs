@@ -1,1 +1,56 @@
-fn main() {}
+//! Experiment and benchmark runners. Output contract (DESIGN.md section 4): one JSON
+//! object per line with `"task"`, `"params"` and figures whose keys carry their units;
+//! a study ends with a `"<runner>_summary"` line.
+//!
+//! ```text
+//! cargo run --release -p sysid-bench -- kalman [--reps 21]
+//! ```
+
+mod kalman;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "sysid-bench",
+    about = "sysid experiment and benchmark runners (JSON lines)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    runner: Runner,
+    /// Accepted for uniformity: output is always JSON lines.
+    #[arg(long, global = true)]
+    json: bool,
+}
+
+#[derive(Subcommand, Debug)]
+enum Runner {
+    /// Square-root Kalman filter and smoother timings (ns per time step).
+    Kalman {
+        /// Repetitions per task; medians are reported.
+        #[arg(long, default_value_t = 21)]
+        reps: usize,
+        /// Only run the cases of this system (lgss or lti2x2).
+        #[arg(long)]
+        system: Option<String>,
+    },
+}
+
+fn main() {
+    let cli = Cli::parse();
+    match cli.runner {
+        Runner::Kalman { reps, system } => kalman::run(reps.max(1), system.as_deref()),
+    }
+}
+
+/// Median, minimum and maximum of a sample (sorted in place).
+pub fn summary(samples: &mut [f64]) -> (f64, f64, f64) {
+    samples.sort_by(f64::total_cmp);
+    let k = samples.len();
+    let median = if k % 2 == 1 {
+        samples[k / 2]
+    } else {
+        0.5 * (samples[k / 2 - 1] + samples[k / 2])
+    };
+    (median, samples[0], samples[k - 1])
+}

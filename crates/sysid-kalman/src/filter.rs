@@ -2,7 +2,7 @@
 
 use crate::{KalmanError, LinearGaussianModel, Record, Result, dense};
 use nalgebra::{DMatrix, DVectorView};
-use sysid_linalg::{LN_2PI, QrScratch, solve_upper, triangularize};
+use sysid_linalg::{LN_2PI, LogProduct, QrScratch, axpy, dot, solve_upper, triangularize};
 
 /// What a filter pass keeps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,6 +94,11 @@ pub struct KalmanWorkspace {
     x_pred: Vec<f64>,
     u_pred: Vec<f64>,
     x_next: Vec<f64>,
+    /// `A'` and `C'`, column-major (column j of `at` is row j of `A`)
+    at: Vec<f64>,
+    ct: Vec<f64>,
+    /// `D u_t + h`
+    du_h: Vec<f64>,
     pub(crate) filter: FilterOutput,
     pub(crate) smoother: crate::SmootherOutput,
     pub(crate) scratch: Vec<f64>,
@@ -135,7 +140,12 @@ impl KalmanWorkspace {
         self.x_pred.resize(n, 0.0);
         self.u_pred.resize(n * n, 0.0);
         self.x_next.resize(n, 0.0);
+        self.du_h.resize(p, 0.0);
         self.observed.reserve(p);
+        self.at.clear();
+        self.at.extend(model.a().transpose().iter());
+        self.ct.clear();
+        self.ct.extend(model.c().transpose().iter());
         let f = &mut self.filter;
         f.n = n;
         f.t_len = t_len;
@@ -156,8 +166,11 @@ impl KalmanWorkspace {
         record_index: usize,
         keep: Keep,
     ) -> Result<f64> {
-        let (n, p, m) = (model.n(), model.p(), model.m());
+        let (n, p) = (model.n(), model.p());
         let t_len = record.len();
+        if keep == Keep::LoglikOnly && n == 1 && p == 1 {
+            return crate::scalar::loglik(model, record, record_index);
+        }
         self.prepare(model, t_len, keep);
         let store = keep == Keep::SmootherInputs;
         let nn = n * n;
@@ -165,7 +178,7 @@ impl KalmanWorkspace {
         let l = model.noise_factor();
         let ell = l.nrows();
         let rows = n + ell;
-        let (a, b, c, d, h) = (model.a(), model.b(), model.c(), model.d(), model.h());
+        let (a, b, d, h) = (model.a(), model.b(), model.d(), model.h());
         self.x_pred.copy_from_slice(model.mu().as_slice());
         self.u_pred
             .copy_from_slice(model.initial_factor().as_slice());
@@ -174,10 +187,14 @@ impl KalmanWorkspace {
             self.filter.pred_mean[..n].copy_from_slice(&self.x_pred);
             self.filter.pred_factor[..nn].copy_from_slice(&self.u_pred);
         }
-        let mut loglik = 0.0;
+        let mut quad_sum = 0.0;
+        let mut observed_sum = 0usize;
+        let mut logdet = LogProduct::new();
+        let l_data = l.as_slice();
         for t in 0..t_len {
             let y_t = record.y.column(t);
             let u_t = record.u.column(t);
+            let u_t = u_t.as_slice();
             self.observed.clear();
             self.observed.extend((0..p).filter(|&i| !y_t[i].is_nan()));
             let po = self.observed.len();
@@ -185,25 +202,27 @@ impl KalmanWorkspace {
             // ---- pre-array [[U C_o', U A', U], [L_e,o, L_w, 0]] ----
             let pre = &mut self.pre;
             let u = &self.u_pred;
+            let fill = |col: &mut [f64], v: &[f64], l_col: &[f64]| {
+                col[..n].fill(0.0);
+                for k in 0..n {
+                    let rows_k = if triangular { k + 1 } else { n };
+                    axpy(v[k], &u[k * n..k * n + rows_k], &mut col[..rows_k]);
+                }
+                col[n..n + ell].copy_from_slice(l_col);
+            };
             for (j, &oi) in self.observed.iter().enumerate() {
-                let col = &mut pre[j * ld..j * ld + rows];
-                for i in 0..n {
-                    let k0 = if triangular { i } else { 0 };
-                    col[i] = (k0..n).map(|k| u[k * n + i] * c[(oi, k)]).sum();
-                }
-                for i in 0..ell {
-                    col[n + i] = l[(i, n + oi)];
-                }
+                fill(
+                    &mut pre[j * ld..j * ld + rows],
+                    &self.ct[oi * n..(oi + 1) * n],
+                    &l_data[(n + oi) * ell..(n + oi + 1) * ell],
+                );
             }
             for j in 0..n {
-                let col = &mut pre[(po + j) * ld..(po + j) * ld + rows];
-                for i in 0..n {
-                    let k0 = if triangular { i } else { 0 };
-                    col[i] = (k0..n).map(|k| u[k * n + i] * a[(j, k)]).sum();
-                }
-                for i in 0..ell {
-                    col[n + i] = l[(i, j)];
-                }
+                fill(
+                    &mut pre[(po + j) * ld..(po + j) * ld + rows],
+                    &self.at[j * n..(j + 1) * n],
+                    &l_data[j * ell..(j + 1) * ell],
+                );
             }
             if store {
                 for j in 0..n {
@@ -214,19 +233,15 @@ impl KalmanWorkspace {
             }
             triangularize(pre, ld, rows, cols, &mut self.qr);
             // ---- innovation, whitened by X11' ----
-            let mut quad = 0.0;
-            let mut half_logdet = 0.0;
+            self.du_h.copy_from_slice(h.as_slice());
+            for (k, &uk) in u_t.iter().enumerate() {
+                axpy(uk, &d.as_slice()[k * p..(k + 1) * p], &mut self.du_h);
+            }
             for (j, &oi) in self.observed.iter().enumerate() {
-                let mut e = y_t[oi] - h[oi];
-                for k in 0..n {
-                    e -= c[(oi, k)] * self.x_pred[k];
-                }
-                for k in 0..m {
-                    e -= d[(oi, k)] * u_t[k];
-                }
-                for k in 0..j {
-                    e -= pre[j * ld + k] * self.eps[k];
-                }
+                let e = y_t[oi]
+                    - self.du_h[oi]
+                    - dot(&self.ct[oi * n..(oi + 1) * n], &self.x_pred)
+                    - dot(&pre[j * ld..j * ld + j], &self.eps[..j]);
                 let diag = pre[j * ld + j];
                 if diag == 0.0 {
                     return Err(KalmanError::SingularInnovation {
@@ -237,21 +252,24 @@ impl KalmanWorkspace {
                 }
                 let w = e / diag;
                 self.eps[j] = w;
-                quad += w * w;
-                half_logdet += diag.ln();
+                quad_sum += w * w;
+                logdet.push(diag);
             }
-            loglik += -0.5 * (po as f64) * LN_2PI - half_logdet - 0.5 * quad;
+            observed_sum += po;
             // ---- x_{t+1|t} = A x + B u + X12' eps ----
+            self.x_next.fill(0.0);
+            for k in 0..n {
+                axpy(
+                    self.x_pred[k],
+                    &a.as_slice()[k * n..(k + 1) * n],
+                    &mut self.x_next,
+                );
+            }
+            for (k, &uk) in u_t.iter().enumerate() {
+                axpy(uk, &b.as_slice()[k * n..(k + 1) * n], &mut self.x_next);
+            }
             for i in 0..n {
-                let mut v: f64 = (0..n).map(|k| a[(i, k)] * self.x_pred[k]).sum();
-                v += (0..m).map(|k| b[(i, k)] * u_t[k]).sum::<f64>();
-                let x12 = &pre[(po + i) * ld..(po + i) * ld + po];
-                v += x12
-                    .iter()
-                    .zip(&self.eps[..po])
-                    .map(|(x, e)| x * e)
-                    .sum::<f64>();
-                self.x_next[i] = v;
+                self.x_next[i] += dot(&pre[(po + i) * ld..(po + i) * ld + po], &self.eps[..po]);
             }
             if store {
                 let f = &mut self.filter;
@@ -288,6 +306,7 @@ impl KalmanWorkspace {
                 f.pred_factor[(t + 1) * nn..(t + 2) * nn].copy_from_slice(&self.u_pred);
             }
         }
+        let loglik = -0.5 * (observed_sum as f64) * LN_2PI - logdet.ln() - 0.5 * quad_sum;
         self.filter.loglik = loglik;
         Ok(loglik)
     }

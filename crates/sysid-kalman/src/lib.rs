@@ -37,6 +37,7 @@ mod dense;
 mod error;
 mod filter;
 mod model;
+mod scalar;
 mod simulate;
 mod smoother;
 mod spec;

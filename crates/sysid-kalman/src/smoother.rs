@@ -102,7 +102,7 @@ impl KalmanWorkspace {
         model: &LinearGaussianModel,
         record: &Record,
         record_index: usize,
-        mut stats: Option<&mut SufficientStatistics>,
+        stats: Option<&mut SufficientStatistics>,
     ) -> Result<f64> {
         let loglik = self.run(model, record, record_index, Keep::SmootherInputs)?;
         let n = model.n();
@@ -124,8 +124,8 @@ impl KalmanWorkspace {
         let mut diff = vec![0.0; n];
         for t in (0..t_len).rev() {
             let jt = &f.gain_t[t * nn..(t + 1) * nn];
-            for i in 0..n {
-                diff[i] = s.mean[(t + 1) * n + i] - f.pred_mean[(t + 1) * n + i];
+            for (i, di) in diff.iter_mut().enumerate() {
+                *di = s.mean[(t + 1) * n + i] - f.pred_mean[(t + 1) * n + i];
             }
             for i in 0..n {
                 let dot: f64 = jt[i * n..(i + 1) * n]
@@ -145,7 +145,7 @@ impl KalmanWorkspace {
             dense::mul_tn(p_t, jt, lag, n, n, n, true);
             dense::symmetrize(p_t, n);
         }
-        if let Some(stats) = stats.as_deref_mut() {
+        if let Some(stats) = stats {
             add_statistics(model, record, &self.smoother, &mut self.scratch, stats);
         }
         Ok(loglik)
@@ -313,14 +313,14 @@ fn missing_output_conditional(
     let c_m = DMatrix::from_fn(nm, n, |i, j| c[(missing[i], j)]);
     let mut gain = DMatrix::zeros(nm, 2 * n);
     gain.columns_mut(0, n)
-        .copy_from(&(c_m - &g_w * a - &g_o * &c_o));
+        .copy_from(&(c_m - g_w * a - g_o * &c_o));
     gain.columns_mut(n, n).copy_from(&g_w);
     let u = DVector::from_column_slice(u);
     let du = d * &u;
     let bu = b * &u;
     let resid_o = DVector::from_fn(no, |i, _| y[observed[i]] - du[observed[i]] - h[observed[i]]);
     let offset =
-        DVector::from_fn(nm, |i, _| du[missing[i]] + h[missing[i]]) - &g_w * bu + &g_o * resid_o;
+        DVector::from_fn(nm, |i, _| du[missing[i]] + h[missing[i]]) - g_w * bu + g_o * resid_o;
     MissingConditional {
         missing,
         gain,

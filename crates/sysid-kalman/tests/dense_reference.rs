@@ -135,3 +135,62 @@ fn records_add_up() {
     assert_eq!(stats.records(), 2);
     assert_eq!(stats.steps(), 2 * rec.len());
 }
+
+/// `loglik` takes a closed-form path for n = p = 1; it must equal the array form
+/// (`filter`), including S != 0, inputs, offsets and missing outputs, and agree with
+/// the dense reference.
+#[test]
+fn scalar_fast_path_equals_array_form() {
+    use nalgebra::dmatrix;
+    use rand::rngs::Xoshiro256PlusPlus;
+    use rand::{RngExt, SeedableRng};
+    let mut ws = KalmanWorkspace::new();
+    for seed in 0..200u64 {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1000 + seed);
+        let q: f64 = rng.random_range(0.01..2.0);
+        let r: f64 = if seed.is_multiple_of(10) {
+            0.0
+        } else {
+            rng.random_range(0.01..2.0)
+        };
+        let s = if seed.is_multiple_of(2) {
+            rng.random_range(-0.9..0.9) * (q * r).sqrt()
+        } else {
+            0.0
+        };
+        let model = sysid_kalman::LinearGaussianModel::builder(
+            dmatrix![rng.random_range(-0.99..0.99)],
+            dmatrix![rng.random_range(-2.0..2.0)],
+            dmatrix![q],
+            dmatrix![r],
+        )
+        .b(dmatrix![rng.random_range(-1.0..1.0), 0.5])
+        .d(dmatrix![rng.random_range(-1.0..1.0), -0.3])
+        .s(dmatrix![s])
+        .h(nalgebra::dvector![rng.random_range(-1.0..1.0)])
+        .mu(nalgebra::dvector![0.3])
+        .p1(dmatrix![rng.random_range(0.1..3.0)])
+        .build()
+        .unwrap();
+        let u = common::gaussian_matrix(&mut rng, 2, 40);
+        let mut rec = model.simulate(&u, &mut rng).unwrap().record;
+        for t in 0..40 {
+            if rng.random_bool(0.2) {
+                rec.y[(0, t)] = f64::NAN;
+            }
+        }
+        let fast = ws.loglik(&model, &rec).unwrap();
+        let array = ws.filter(&model, &rec).unwrap().loglik();
+        assert!(
+            (fast - array).abs() <= 1e-10 * array.abs(),
+            "seed {seed}: {fast} vs {array}"
+        );
+        if r > 0.0 {
+            let dense = DenseReference::new(&model, &rec).loglik;
+            assert!(
+                (fast - dense).abs() <= 1e-9 * dense.abs(),
+                "seed {seed}: {fast} vs dense {dense}"
+            );
+        }
+    }
+}

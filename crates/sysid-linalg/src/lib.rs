@@ -18,15 +18,19 @@
 //! dimension so that callers can reuse one buffer for pre-arrays of varying shape.
 
 mod cholesky;
+mod dot;
 mod error;
 mod gaussian;
+mod logdet;
 mod qr;
 mod symmetric;
 mod triangular;
 
 pub use cholesky::{check_psd, cholesky_upper, psd_factor};
+pub use dot::{axpy, dot};
 pub use error::LinalgError;
 pub use gaussian::{LN_2PI, gaussian_logpdf_from_factor, logdet_from_factor};
+pub use logdet::LogProduct;
 pub use qr::{QrScratch, triangularize};
 pub use symmetric::{check_finite, check_symmetric, symmetrize};
 pub use triangular::{solve_upper, solve_upper_transpose};

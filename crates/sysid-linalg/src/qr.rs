@@ -2,13 +2,14 @@
 /// treated as linearly dependent on the previous columns: its pivot is zero.
 const ZERO_PIVOT_REL_TOL: f64 = 1e-13;
 
+use crate::{axpy, dot};
+
 /// Reusable scratch space for [`triangularize`]; grows to the largest problem seen and
 /// is never shrunk, so a filter allocates it once.
 #[derive(Debug, Clone, Default)]
 pub struct QrScratch {
     pivot_rows: Vec<usize>,
     initial_norms: Vec<f64>,
-    reordered: Vec<f64>,
 }
 
 const SKIPPED: usize = usize::MAX;
@@ -60,7 +61,7 @@ pub fn triangularize(a: &mut [f64], ld: usize, rows: usize, cols: usize, scratch
     }
     for j in 0..cols {
         let col = &a[j * ld..j * ld + rows];
-        scratch.initial_norms[j] = col.iter().map(|x| x * x).sum::<f64>().sqrt();
+        scratch.initial_norms[j] = dot(col, col).sqrt();
     }
     let mut row = 0;
     let mut skipped_any = false;
@@ -72,7 +73,7 @@ pub fn triangularize(a: &mut [f64], ld: usize, rows: usize, cols: usize, scratch
         }
         let (head, tail) = a.split_at_mut((j + 1) * ld);
         let v = &mut head[j * ld + row..j * ld + rows];
-        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let norm = dot(v, v).sqrt();
         if norm == 0.0 || norm <= ZERO_PIVOT_REL_TOL * scratch.initial_norms[j] {
             scratch.pivot_rows[j] = SKIPPED;
             skipped_any = true;
@@ -86,10 +87,9 @@ pub fn triangularize(a: &mut [f64], ld: usize, rows: usize, cols: usize, scratch
         let trailing = cols - j - 1;
         for k in 0..trailing {
             let ak = &mut tail[k * ld + row..k * ld + rows];
-            let s: f64 = v.iter().zip(ak.iter()).map(|(vi, ai)| vi * ai).sum();
-            let f = tau * s;
-            for (ai, vi) in ak.iter_mut().zip(v.iter()) {
-                *ai -= f * vi;
+            let f = tau * dot(v, ak);
+            if f != 0.0 {
+                axpy(-f, v, ak);
             }
         }
         v[0] = alpha;
@@ -116,23 +116,17 @@ pub fn triangularize(a: &mut [f64], ld: usize, rows: usize, cols: usize, scratch
 }
 
 /// Moves the Householder rows to their column's position and writes zero rows for the
-/// skipped (zero-pivot) columns.
-fn place_rows(a: &mut [f64], ld: usize, cols: usize, scratch: &mut QrScratch) {
-    let out = &mut scratch.reordered;
-    out.clear();
-    out.resize(cols * cols, 0.0);
-    for j in 0..cols {
+/// skipped (zero-pivot) columns, in place. Pivot rows never exceed their column index
+/// and increase with it, so going from the last column down never overwrites a row
+/// that is still to be moved.
+fn place_rows(a: &mut [f64], ld: usize, cols: usize, scratch: &QrScratch) {
+    for j in (0..cols).rev() {
         let r = scratch.pivot_rows[j];
-        if r == SKIPPED {
+        if r == j {
             continue;
         }
         for k in j..cols {
-            out[k * cols + j] = a[k * ld + r];
-        }
-    }
-    for k in 0..cols {
-        for j in 0..cols {
-            a[k * ld + j] = out[k * cols + j];
+            a[k * ld + j] = if r == SKIPPED { 0.0 } else { a[k * ld + r] };
         }
     }
 }

@@ -58,7 +58,7 @@ pub fn solve_upper_transpose(
         let x = &mut b[c * ldb..c * ldb + n];
         for i in 0..n {
             let col = &u[i * ldu..i * ldu + i];
-            let s: f64 = col.iter().zip(x[..i].iter()).map(|(uk, xk)| uk * xk).sum();
+            let s = crate::dot(col, &x[..i]);
             let d = u[i * ldu + i];
             x[i] = if d == 0.0 { 0.0 } else { (x[i] - s) / d };
         }

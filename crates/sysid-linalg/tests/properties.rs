@@ -55,12 +55,11 @@ proptest! {
         let gram = x.transpose() * &x;
         prop_assert!((r.transpose() * &r - &gram).norm() <= 1e-12 * gram.norm().max(1.0));
         // for a full-column-rank X, R is the unique Cholesky factor of X'X
-        if rows >= cols {
-            if let Ok(u) = cholesky_upper("G", &gram) {
-                if u.diagonal().min() > 1e-6 * u.diagonal().max() {
-                    prop_assert!(rel_err(&r, &u) < 1e-8);
-                }
-            }
+        if rows >= cols
+            && let Ok(u) = cholesky_upper("G", &gram)
+            && u.diagonal().min() > 1e-6 * u.diagonal().max()
+        {
+            prop_assert!(rel_err(&r, &u) < 1e-8);
         }
     }
 

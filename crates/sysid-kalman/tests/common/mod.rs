@@ -31,7 +31,7 @@ pub fn random_system(seed: u64) -> (LinearGaussianModel, Record) {
     let joint = spd(&mut rng, n + p, 0.05);
     let q = joint.view((0, 0), (n, n)).clone_owned();
     let r = joint.view((n, n), (p, p)).clone_owned();
-    let with_s = seed % 2 == 0;
+    let with_s = seed.is_multiple_of(2);
     let mut builder = LinearGaussianModel::builder(a, c, q, r)
         .b(b)
         .d(d)
@@ -40,7 +40,7 @@ pub fn random_system(seed: u64) -> (LinearGaussianModel, Record) {
     if with_s {
         builder = builder.s(joint.view((0, n), (n, p)).clone_owned());
     }
-    if seed % 3 != 0 {
+    if !seed.is_multiple_of(3) {
         builder = builder.h(DVector::from_fn(p, |_, _| rng.random_range(-2.0..2.0)));
     }
     let model = builder.build().unwrap();

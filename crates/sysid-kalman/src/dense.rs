@@ -18,6 +18,9 @@ pub(crate) fn mul_nn(c: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, s:
 }
 
 /// `c (+)= a' b` with `a` (k x r), `b` (k x s), `c` (r x s); adds when `accumulate`.
+/// `a'` is formed in `scratch` so that the product runs in the vectorisable column
+/// (axpy) form rather than as a sequence of dot products.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn mul_tn(
     c: &mut [f64],
     a: &[f64],
@@ -26,17 +29,32 @@ pub(crate) fn mul_tn(
     r: usize,
     s: usize,
     accumulate: bool,
+    scratch: &mut Vec<f64>,
 ) {
+    scratch.resize(r * k, 0.0);
+    for i in 0..r {
+        for l in 0..k {
+            scratch[l * r + i] = a[i * k + l];
+        }
+    }
+    if accumulate {
+        mul_nn_add(c, scratch, b, r, k, s);
+    } else {
+        mul_nn(c, scratch, b, r, k, s);
+    }
+}
+
+/// `c += a b` with `a` (r x k), `b` (k x s), `c` (r x s).
+pub(crate) fn mul_nn_add(c: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, s: usize) {
     for j in 0..s {
-        let bj = &b[j * k..(j + 1) * k];
-        for i in 0..r {
-            let dot: f64 = a[i * k..(i + 1) * k]
-                .iter()
-                .zip(bj)
-                .map(|(x, y)| x * y)
-                .sum();
-            let cij = &mut c[j * r + i];
-            *cij = if accumulate { *cij + dot } else { dot };
+        let cj = &mut c[j * r..(j + 1) * r];
+        for l in 0..k {
+            let blj = b[j * k + l];
+            if blj != 0.0 {
+                for (ci, ai) in cj.iter_mut().zip(&a[l * r..(l + 1) * r]) {
+                    *ci += ai * blj;
+                }
+            }
         }
     }
 }

@@ -2,7 +2,9 @@
 
 use crate::{KalmanError, LinearGaussianModel, Record, Result, dense};
 use nalgebra::{DMatrix, DVectorView};
-use sysid_linalg::{LN_2PI, LogProduct, QrScratch, axpy, dot, solve_upper, triangularize};
+use sysid_linalg::{
+    LN_2PI, LogProduct, QrScratch, axpy, dot, solve_upper, triangularize, triangularize_stacked,
+};
 
 /// What a filter pass keeps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -57,7 +59,7 @@ impl FilterOutput {
         let n = self.n;
         let u = &self.pred_factor[k * n * n..(k + 1) * n * n];
         let mut p = DMatrix::zeros(n, n);
-        dense::mul_tn(p.as_mut_slice(), u, u, n, n, n, false);
+        dense::mul_tn(p.as_mut_slice(), u, u, n, n, n, false, &mut Vec::new());
         p
     }
     /// Filtered mean `x_{k+1|k+1}` (index `k` in `0..T`).
@@ -73,10 +75,11 @@ impl FilterOutput {
         let jt = &self.gain_t[k * nn..(k + 1) * nn];
         let u = &self.pred_factor[(k + 1) * nn..(k + 2) * nn];
         let mut p = DMatrix::zeros(n, n);
-        dense::mul_tn(p.as_mut_slice(), x33, x33, n, n, n, false);
+        let mut scratch = Vec::new();
+        dense::mul_tn(p.as_mut_slice(), x33, x33, n, n, n, false, &mut scratch);
         let mut uj = vec![0.0; nn];
         dense::mul_nn(&mut uj, u, jt, n, n, n);
-        dense::mul_tn(p.as_mut_slice(), &uj, &uj, n, n, n, true);
+        dense::mul_tn(p.as_mut_slice(), &uj, &uj, n, n, n, true, &mut scratch);
         dense::symmetrize(p.as_mut_slice(), n);
         p
     }
@@ -86,8 +89,21 @@ impl FilterOutput {
 /// calls (and EM iterations): no allocation per time step.
 #[derive(Debug, Clone, Default)]
 pub struct KalmanWorkspace {
-    pre: Vec<f64>,
-    ld: usize,
+    /// the factor being updated, `c x c` with leading dimension `ldr = p + 2n`
+    rbuf: Vec<f64>,
+    ldr: usize,
+    /// the state rows `[U C_o', U A', U]`, `rank x c`, leading dimension `n`
+    xbuf: Vec<f64>,
+    /// rows of `U` that are not zero (zero rows carry no uncertainty)
+    u_rows: Vec<usize>,
+    /// `U` restricted to `u_rows`, `rank x n`, leading dimension `n`
+    u_compact: Vec<f64>,
+    /// the initial `R` of a step for the pattern `noise_pattern`: the triangularised
+    /// noise factor of `[e_o; w]` padded with the zero blocks, leading dimension `ldr`
+    r_template: Vec<f64>,
+    noise_pattern: Option<(u64, Vec<usize>)>,
+    observed_mask: u64,
+    noise_buf: Vec<f64>,
     qr: QrScratch,
     observed: Vec<usize>,
     eps: Vec<f64>,
@@ -132,10 +148,11 @@ impl KalmanWorkspace {
 
     fn prepare(&mut self, model: &LinearGaussianModel, t_len: usize, keep: Keep) {
         let (n, p) = (model.n(), model.p());
-        let rows = n + model.noise_factor().nrows();
-        let cols = p + 2 * n;
-        self.ld = rows.max(cols);
-        self.pre.resize(self.ld * cols, 0.0);
+        self.ldr = p + 2 * n;
+        self.rbuf.resize(self.ldr * self.ldr, 0.0);
+        self.xbuf.resize(n * self.ldr, 0.0);
+        self.u_compact.resize(n * n, 0.0);
+        self.noise_pattern = None;
         self.eps.resize(p, 0.0);
         self.x_pred.resize(n, 0.0);
         self.u_pred.resize(n * n, 0.0);
@@ -158,6 +175,61 @@ impl KalmanWorkspace {
         }
     }
 
+    /// Triangularises the noise factor columns `[e_o, w]` for the current observed
+    /// set (once per distinct pattern in a row of steps).
+    fn update_noise_factor(&mut self, model: &LinearGaussianModel) {
+        if let Some((mask, pattern)) = &self.noise_pattern
+            && *mask == self.observed_mask
+            && (model.p() <= 64 || *pattern == self.observed)
+        {
+            return;
+        }
+        let n = model.n();
+        let l = model.noise_factor();
+        let ell = l.nrows();
+        let k = self.observed.len() + n;
+        let ld = ell.max(k);
+        self.noise_buf.clear();
+        self.noise_buf.resize(ld * k, 0.0);
+        let l_data = l.as_slice();
+        let sources = self.observed.iter().map(|&o| n + o).chain(0..n);
+        for (j, src) in sources.enumerate() {
+            self.noise_buf[j * ld..j * ld + ell]
+                .copy_from_slice(&l_data[src * ell..(src + 1) * ell]);
+        }
+        triangularize(&mut self.noise_buf, ld, ell, k, &mut self.qr);
+        let ldr = self.ldr;
+        self.r_template.clear();
+        self.r_template.resize(ldr * ldr, 0.0);
+        for j in 0..k {
+            self.r_template[j * ldr..j * ldr + k]
+                .copy_from_slice(&self.noise_buf[j * ld..j * ld + k]);
+        }
+        self.noise_pattern = Some((self.observed_mask, self.observed.clone()));
+    }
+
+    /// Records which rows of the `n x n` factor `u_pred` are non-zero, and copies them
+    /// into `u_compact`.
+    fn compact_factor(&mut self, n: usize, triangular: bool) {
+        self.u_rows.clear();
+        for i in 0..n {
+            let nonzero = if triangular {
+                self.u_pred[i * n + i] != 0.0
+            } else {
+                (0..n).any(|k| self.u_pred[k * n + i] != 0.0)
+            };
+            if nonzero {
+                self.u_rows.push(i);
+            }
+        }
+        let rank = self.u_rows.len();
+        for k in 0..n {
+            for (r, &i) in self.u_rows.iter().enumerate() {
+                self.u_compact[k * rank + r] = self.u_pred[k * n + i];
+            }
+        }
+    }
+
     /// The forward pass. `record_index` only labels errors.
     pub(crate) fn run(
         &mut self,
@@ -174,10 +246,6 @@ impl KalmanWorkspace {
         self.prepare(model, t_len, keep);
         let store = keep == Keep::SmootherInputs;
         let nn = n * n;
-        let ld = self.ld;
-        let l = model.noise_factor();
-        let ell = l.nrows();
-        let rows = n + ell;
         let (a, b, d, h) = (model.a(), model.b(), model.d(), model.h());
         self.x_pred.copy_from_slice(model.mu().as_slice());
         self.u_pred
@@ -190,48 +258,54 @@ impl KalmanWorkspace {
         let mut quad_sum = 0.0;
         let mut observed_sum = 0usize;
         let mut logdet = LogProduct::new();
-        let l_data = l.as_slice();
+        let ld = self.ldr;
         for t in 0..t_len {
             let y_t = record.y.column(t);
             let u_t = record.u.column(t);
             let u_t = u_t.as_slice();
             self.observed.clear();
-            self.observed.extend((0..p).filter(|&i| !y_t[i].is_nan()));
-            let po = self.observed.len();
-            let cols = po + n + if store { n } else { 0 };
-            // ---- pre-array [[U C_o', U A', U], [L_e,o, L_w, 0]] ----
-            let pre = &mut self.pre;
-            let u = &self.u_pred;
-            let fill = |col: &mut [f64], v: &[f64], l_col: &[f64]| {
-                col[..n].fill(0.0);
-                for k in 0..n {
-                    let rows_k = if triangular { k + 1 } else { n };
-                    axpy(v[k], &u[k * n..k * n + rows_k], &mut col[..rows_k]);
+            self.observed_mask = 0;
+            for (i, &v) in y_t.iter().enumerate() {
+                if !v.is_nan() {
+                    self.observed.push(i);
+                    self.observed_mask |= 1u64.wrapping_shl(i as u32 % 64);
                 }
-                col[n..n + ell].copy_from_slice(l_col);
+            }
+            let po = self.observed.len();
+            let k_noise = po + n;
+            let cols = k_noise + if store { n } else { 0 };
+            self.update_noise_factor(model);
+            self.compact_factor(n, triangular);
+            // ---- R = [[triangularised [L_e,o, L_w], 0], [0, 0]] ----
+            let pre = &mut self.rbuf;
+            pre[..ld * cols].copy_from_slice(&self.r_template[..ld * cols]);
+            // ---- X = U_nz [C_o', A', I] (rank rows) ----
+            let rank = self.u_rows.len();
+            let ldx = n;
+            let uc = &self.u_compact[..rank * n];
+            let xb = &mut self.xbuf;
+            let mut fill = |j: usize, v: &[f64]| {
+                let col = &mut xb[j * ldx..j * ldx + rank];
+                col.fill(0.0);
+                for (k, &vk) in v.iter().enumerate() {
+                    if vk != 0.0 {
+                        axpy(vk, &uc[k * rank..(k + 1) * rank], col);
+                    }
+                }
             };
             for (j, &oi) in self.observed.iter().enumerate() {
-                fill(
-                    &mut pre[j * ld..j * ld + rows],
-                    &self.ct[oi * n..(oi + 1) * n],
-                    &l_data[(n + oi) * ell..(n + oi + 1) * ell],
-                );
+                fill(j, &self.ct[oi * n..(oi + 1) * n]);
             }
             for j in 0..n {
-                fill(
-                    &mut pre[(po + j) * ld..(po + j) * ld + rows],
-                    &self.at[j * n..(j + 1) * n],
-                    &l_data[j * ell..(j + 1) * ell],
-                );
+                fill(po + j, &self.at[j * n..(j + 1) * n]);
             }
             if store {
-                for j in 0..n {
-                    let col = &mut pre[(po + n + j) * ld..(po + n + j) * ld + rows];
-                    col[..n].copy_from_slice(&u[j * n..(j + 1) * n]);
-                    col[n..].fill(0.0);
+                for k in 0..n {
+                    let j = k_noise + k;
+                    xb[j * ldx..j * ldx + rank].copy_from_slice(&uc[k * rank..(k + 1) * rank]);
                 }
             }
-            triangularize(pre, ld, rows, cols, &mut self.qr);
+            triangularize_stacked(pre, ld, xb, ldx, rank, cols);
             // ---- innovation, whitened by X11' ----
             self.du_h.copy_from_slice(h.as_slice());
             for (k, &uk) in u_t.iter().enumerate() {

@@ -119,7 +119,16 @@ impl KalmanWorkspace {
         s.mean[t_len * n..].copy_from_slice(&f.pred_mean[t_len * n..]);
         {
             let u = &f.pred_factor[t_len * nn..];
-            dense::mul_tn(&mut s.cov[t_len * nn..], u, u, n, n, n, false);
+            dense::mul_tn(
+                &mut s.cov[t_len * nn..],
+                u,
+                u,
+                n,
+                n,
+                n,
+                false,
+                &mut self.scratch,
+            );
         }
         let mut diff = vec![0.0; n];
         for t in (0..t_len).rev() {
@@ -141,8 +150,8 @@ impl KalmanWorkspace {
             let lag = &mut s.lag_one[t * nn..(t + 1) * nn];
             dense::mul_nn(lag, p_next, jt, n, n, n);
             let x33 = &f.cond_factor[t * nn..(t + 1) * nn];
-            dense::mul_tn(p_t, x33, x33, n, n, n, false);
-            dense::mul_tn(p_t, jt, lag, n, n, n, true);
+            dense::mul_tn(p_t, x33, x33, n, n, n, false, &mut self.scratch);
+            dense::mul_tn(p_t, jt, lag, n, n, n, true, &mut self.scratch);
             dense::symmetrize(p_t, n);
         }
         if let Some(stats) = stats {
@@ -152,7 +161,10 @@ impl KalmanWorkspace {
     }
 }
 
-/// Adds the conditional moments of every `c_t = [x_t; u_t; 1; x_{t+1}; y_t]`.
+/// Adds the conditional moments of every `c_t = [x_t; u_t; 1; x_{t+1}; y_t]`: the
+/// conditional means go into a `T x dim` matrix `M` and the covariances are summed, so
+/// the statistics receive `sum_t Cov(c_t) + M'M` in one batch (one matrix product
+/// instead of `T` rank-one updates).
 fn add_statistics(
     model: &LinearGaussianModel,
     record: &Record,
@@ -163,74 +175,88 @@ fn add_statistics(
     let (n, m, p) = (model.n(), model.m(), model.p());
     let nn = n * n;
     let dim = stats.dim();
+    let t_len = record.len();
     let (ox, ou, o1, oxn, oy) = (0, n, n + m, n + m + 1, 2 * n + m + 1);
     scratch.clear();
-    scratch.resize(dim + dim * dim, 0.0);
-    let (mean, cov) = scratch.split_at_mut(dim);
+    scratch.resize(t_len * dim + dim * dim + 3 * nn, 0.0);
+    let (means, rest) = scratch.split_at_mut(t_len * dim);
+    let (cov, sums) = rest.split_at_mut(dim * dim);
+    let (sum_p, rest) = sums.split_at_mut(nn);
+    let (sum_p_next, sum_lag) = rest.split_at_mut(nn);
     stats.observe_initial(&sm.mean[..n], &sm.cov[..nn]);
-    for t in 0..record.len() {
-        // means
-        mean[ox..ox + n].copy_from_slice(&sm.mean[t * n..(t + 1) * n]);
-        mean[ou..ou + m].copy_from_slice(record.u.column(t).as_slice());
-        mean[o1] = 1.0;
-        mean[oxn..oxn + n].copy_from_slice(&sm.mean[(t + 1) * n..(t + 2) * n]);
+    // means: row t of the column-major T x dim matrix
+    let mut set = |t: usize, j: usize, v: f64| means[j * t_len + t] = v;
+    for t in 0..t_len {
+        for i in 0..n {
+            set(t, ox + i, sm.mean[t * n + i]);
+            set(t, oxn + i, sm.mean[(t + 1) * n + i]);
+        }
+        for i in 0..m {
+            set(t, ou + i, record.u[(i, t)]);
+        }
+        set(t, o1, 1.0);
+        for i in 0..p {
+            set(t, oy + i, record.y[(i, t)]);
+        }
+    }
+    for t in 0..t_len {
+        for (acc, v) in sum_p.iter_mut().zip(&sm.cov[t * nn..(t + 1) * nn]) {
+            *acc += v;
+        }
+        for (acc, v) in sum_p_next
+            .iter_mut()
+            .zip(&sm.cov[(t + 1) * nn..(t + 2) * nn])
+        {
+            *acc += v;
+        }
+        for (acc, v) in sum_lag.iter_mut().zip(&sm.lag_one[t * nn..(t + 1) * nn]) {
+            *acc += v;
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            cov[(ox + j) * dim + ox + i] = sum_p[j * n + i];
+            cov[(oxn + j) * dim + oxn + i] = sum_p_next[j * n + i];
+            cov[(ox + j) * dim + oxn + i] = sum_lag[j * n + i]; // Cov(x_{t+1,i}, x_{t,j})
+            cov[(oxn + j) * dim + ox + i] = sum_lag[i * n + j];
+        }
+    }
+    // missing outputs: exact conditional moments through (x_t, x_{t+1})
+    for t in 0..t_len {
         let y_t = record.y.column(t);
-        // covariance blocks of (x_t, x_{t+1})
+        if !y_t.iter().any(|v| v.is_nan()) {
+            continue;
+        }
+        let cond = missing_output_conditional(model, record.u.column(t).as_slice(), y_t.as_slice());
+        let mut joint = DMatrix::zeros(2 * n, 2 * n);
         let p_t = &sm.cov[t * nn..(t + 1) * nn];
         let p_next = &sm.cov[(t + 1) * nn..(t + 2) * nn];
         let lag = &sm.lag_one[t * nn..(t + 1) * nn];
         for j in 0..n {
             for i in 0..n {
-                cov[(ox + j) * dim + ox + i] = p_t[j * n + i];
-                cov[(oxn + j) * dim + oxn + i] = p_next[j * n + i];
-                cov[(ox + j) * dim + oxn + i] = lag[j * n + i]; // Cov(x_{t+1,i}, x_{t,j})
-                cov[(oxn + j) * dim + ox + i] = lag[i * n + j];
+                joint[(i, j)] = p_t[j * n + i];
+                joint[(n + i, n + j)] = p_next[j * n + i];
+                joint[(n + i, j)] = lag[j * n + i];
+                joint[(j, n + i)] = lag[j * n + i];
             }
         }
-        let any_missing = y_t.iter().any(|v| v.is_nan());
-        if !any_missing {
-            mean[oy..oy + p].copy_from_slice(y_t.as_slice());
-            stats.observe_step(mean, cov);
-            continue;
-        }
-        // missing outputs: exact conditional moments through (x_t, x_{t+1})
-        let cond = missing_output_conditional(model, record.u.column(t).as_slice(), y_t.as_slice());
-        let mut joint = DMatrix::zeros(2 * n, 2 * n);
-        let mut xs = DVector::zeros(2 * n);
-        for j in 0..2 * n {
-            let cj = if j < n { ox + j } else { oxn + j - n };
-            xs[j] = mean[cj];
-            for i in 0..2 * n {
-                let ci = if i < n { ox + i } else { oxn + i - n };
-                joint[(i, j)] = cov[cj * dim + ci];
-            }
-        }
+        let xs = DVector::from_fn(2 * n, |i, _| sm.mean[t * n + i]);
         let y_mean = &cond.gain * &xs + &cond.offset;
         let cross = &cond.gain * &joint; // Cov(y_mis, (x_t, x_{t+1}))
         let y_cov = &cross * cond.gain.transpose() + &cond.residual_cov;
-        for i in 0..p {
-            mean[oy + i] = y_t[i];
-        }
         for (a, &yi) in cond.missing.iter().enumerate() {
-            mean[oy + yi] = y_mean[a];
+            means[(oy + yi) * t_len + t] = y_mean[a];
             for j in 0..2 * n {
                 let cj = if j < n { ox + j } else { oxn + j - n };
-                cov[cj * dim + oy + yi] = cross[(a, j)];
-                cov[(oy + yi) * dim + cj] = cross[(a, j)];
+                cov[cj * dim + oy + yi] += cross[(a, j)];
+                cov[(oy + yi) * dim + cj] += cross[(a, j)];
             }
             for (b, &yk) in cond.missing.iter().enumerate() {
-                cov[(oy + yk) * dim + oy + yi] = y_cov[(a, b)];
-            }
-        }
-        stats.observe_step(mean, cov);
-        // clear the y blocks for the next step
-        for &yi in &cond.missing {
-            for j in 0..dim {
-                cov[j * dim + oy + yi] = 0.0;
-                cov[(oy + yi) * dim + j] = 0.0;
+                cov[(oy + yk) * dim + oy + yi] += y_cov[(a, b)];
             }
         }
     }
+    stats.observe_batch(means, t_len, cov);
 }
 
 /// `y_mis = gain [x_t; x_{t+1}] + offset + nu`, `nu ~ N(0, residual_cov)` independent

@@ -122,6 +122,26 @@ impl SufficientStatistics {
         self.steps += 1;
     }
 
+    /// Adds `steps` steps at once: `H += covariance_sum + M'M`, where `means` is the
+    /// column-major `steps x dim` matrix whose row `t` is the conditional mean of `c_t`
+    /// and `covariance_sum` (column-major `dim x dim`) is `sum_t Cov(c_t)`.
+    pub fn observe_batch(&mut self, means: &[f64], steps: usize, covariance_sum: &[f64]) {
+        let dim = self.dim();
+        let h = self.second_moment.as_mut_slice();
+        for j in 0..dim {
+            let mj = &means[j * steps..(j + 1) * steps];
+            for i in 0..=j {
+                let v = sysid_linalg::dot(&means[i * steps..(i + 1) * steps], mj)
+                    + covariance_sum[j * dim + i];
+                h[j * dim + i] += v;
+                if i != j {
+                    h[i * dim + j] += v;
+                }
+            }
+        }
+        self.steps += steps;
+    }
+
     /// Adds one step observed without uncertainty (e.g. a sampled trajectory of a
     /// particle smoother, with `weight`): `H += weight c c'`. Counts as `weight` of a
     /// step only in the sense that callers must observe weights summing to one per step

@@ -23,6 +23,7 @@ mod error;
 mod gaussian;
 mod logdet;
 mod qr;
+mod qr_stacked;
 mod symmetric;
 mod triangular;
 
@@ -32,5 +33,6 @@ pub use error::LinalgError;
 pub use gaussian::{LN_2PI, gaussian_logpdf_from_factor, logdet_from_factor};
 pub use logdet::LogProduct;
 pub use qr::{QrScratch, triangularize};
+pub use qr_stacked::triangularize_stacked;
 pub use symmetric::{check_finite, check_symmetric, symmetrize};
 pub use triangular::{solve_upper, solve_upper_transpose};

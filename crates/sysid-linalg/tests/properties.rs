@@ -64,6 +64,46 @@ proptest! {
     }
 
     #[test]
+    fn stacked_triangularisation_equals_the_general_one(
+            (r0, x) in (1usize..7, 0usize..9).prop_flat_map(|(c, rx)| (matrix(c + 1, c), matrix(rx, c))),
+            singular in proptest::bool::ANY) {
+        let cols = r0.ncols();
+        // a triangular factor with the zero-pivot convention (possibly singular)
+        let mut g = r0.clone();
+        if singular && cols > 1 { g.row_mut(0).fill(0.0); }
+        let ld = (g.nrows()).max(cols);
+        let mut buf = vec![0.0; ld * cols];
+        for j in 0..cols { for i in 0..g.nrows() { buf[j * ld + i] = g[(i, j)]; } }
+        triangularize(&mut buf, ld, g.nrows(), cols, &mut QrScratch::default());
+        let r = DMatrix::from_fn(cols, cols, |i, j| buf[j * ld + i]);
+        // stacked: [R; X]
+        let mut r_buf = r.as_slice().to_vec();
+        let mut x_buf = x.as_slice().to_vec();
+        triangularize_stacked(&mut r_buf, cols, &mut x_buf, x.nrows().max(1), x.nrows(), cols);
+        let stacked = DMatrix::from_column_slice(cols, cols, &r_buf);
+        // the general kernel on the dense stack is the reference
+        let full = DMatrix::from_fn(cols + x.nrows(), cols, |i, j| if i < cols { r[(i, j)] } else { x[(i - cols, j)] });
+        let ldf = full.nrows().max(cols);
+        let mut fb = vec![0.0; ldf * cols];
+        for j in 0..cols { for i in 0..full.nrows() { fb[j * ldf + i] = full[(i, j)]; } }
+        triangularize(&mut fb, ldf, full.nrows(), cols, &mut QrScratch::default());
+        let reference = DMatrix::from_fn(cols, cols, |i, j| fb[j * ldf + i]);
+        let gram = full.transpose() * &full;
+        let scale = gram.norm().max(1.0);
+        prop_assert!((stacked.transpose() * &stacked - &gram).norm() <= 1e-12 * scale);
+        for i in 0..cols {
+            prop_assert!(stacked[(i, i)] >= 0.0);
+            for j in 0..i { prop_assert_eq!(stacked[(i, j)], 0.0); }
+            if stacked[(i, i)] == 0.0 {
+                prop_assert!(stacked.row(i).iter().all(|&v| v == 0.0));
+            }
+        }
+        if reference.diagonal().min() > 1e-6 * reference.diagonal().max() {
+            prop_assert!(rel_err(&stacked, &reference) < 1e-8);
+        }
+    }
+
+    #[test]
     fn triangular_solves_have_small_residuals(m in (1usize..8).prop_flat_map(spd),
                                               seed in proptest::collection::vec(-5.0..5.0_f64, 8)) {
         let n = m.nrows();

@@ -69,3 +69,68 @@ pub(crate) fn symmetrize(m: &mut [f64], n: usize) {
         }
     }
 }
+
+/// `c = op(a) b` or `c += op(a) b` for square `n x n` matrices, `op(a) = a'` when
+/// `transpose_a`. Sizes up to 8 (the common state dimensions) run a kernel specialised
+/// at compile time, which unrolls fully and keeps a column in registers; larger sizes
+/// use the general routines.
+pub(crate) fn mul_square(
+    c: &mut [f64],
+    a: &[f64],
+    b: &[f64],
+    n: usize,
+    transpose_a: bool,
+    accumulate: bool,
+    scratch: &mut Vec<f64>,
+) {
+    match n {
+        1 => square_kernel::<1>(c, a, b, transpose_a, accumulate),
+        2 => square_kernel::<2>(c, a, b, transpose_a, accumulate),
+        3 => square_kernel::<3>(c, a, b, transpose_a, accumulate),
+        4 => square_kernel::<4>(c, a, b, transpose_a, accumulate),
+        5 => square_kernel::<5>(c, a, b, transpose_a, accumulate),
+        6 => square_kernel::<6>(c, a, b, transpose_a, accumulate),
+        7 => square_kernel::<7>(c, a, b, transpose_a, accumulate),
+        8 => square_kernel::<8>(c, a, b, transpose_a, accumulate),
+        _ => match (transpose_a, accumulate) {
+            (true, acc) => mul_tn(c, a, b, n, n, n, acc, scratch),
+            (false, false) => mul_nn(c, a, b, n, n, n),
+            (false, true) => mul_nn_add(c, a, b, n, n, n),
+        },
+    }
+}
+
+#[inline(always)]
+fn square_kernel<const N: usize>(
+    c: &mut [f64],
+    a: &[f64],
+    b: &[f64],
+    transpose_a: bool,
+    accumulate: bool,
+) {
+    let (a, b, c) = (&a[..N * N], &b[..N * N], &mut c[..N * N]);
+    // columns of op(a)
+    let mut cols = [[0.0_f64; N]; N];
+    for (l, col) in cols.iter_mut().enumerate() {
+        for (i, v) in col.iter_mut().enumerate() {
+            *v = if transpose_a {
+                a[i * N + l]
+            } else {
+                a[l * N + i]
+            };
+        }
+    }
+    for j in 0..N {
+        let mut out = [0.0_f64; N];
+        if accumulate {
+            out.copy_from_slice(&c[j * N..(j + 1) * N]);
+        }
+        for (l, col) in cols.iter().enumerate() {
+            let blj = b[j * N + l];
+            for i in 0..N {
+                out[i] += col[i] * blj;
+            }
+        }
+        c[j * N..(j + 1) * N].copy_from_slice(&out);
+    }
+}

@@ -118,6 +118,7 @@ pub struct KalmanWorkspace {
     pub(crate) filter: FilterOutput,
     pub(crate) smoother: crate::SmootherOutput,
     pub(crate) scratch: Vec<f64>,
+    pub(crate) sums_buf: Vec<f64>,
 }
 
 impl KalmanWorkspace {

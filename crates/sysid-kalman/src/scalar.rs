@@ -8,6 +8,11 @@
 //! x'  = a x_f + b u + g (y - c x_f - d u - h),   g = s / r
 //! P'  = (a - g c)^2 P_f + (q - g s)
 //! ```
+//! evaluated in the algebraically equal form that shortens the dependency chain
+//! (`P' = (a - g c)^2 r P / S + q - g s`). The same holds as a formula:
+//! ```text
+//! P' >= 0 whenever P >= 0, r >= 0, q - g s >= 0
+//! ```
 //! Every variance is a product or sum of non-negative terms, so it stays non-negative
 //! without a square root; it equals the array form to round-off (tested against it
 //! and against the dense joint Gaussian).
@@ -38,6 +43,12 @@ pub(crate) fn loglik(
     let u = record.u.as_slice();
     let mut logdet = LogProduct::new();
     let (mut quad, mut observed) = (0.0, 0usize);
+    // The variance recursion is the critical dependency chain; it is written so that
+    // each step costs one multiply-add, one division and one add on the chain:
+    //   S = c^2 P + r,  P' = (a~^2 r) P / S + q~
+    // and the mean update is one multiply-add on its chain:
+    //   x' = (a~ r / S) x + a~ P c (y - d u - h) / S + b u + g (y - d u - h).
+    let (c2, ar2) = (c * c, a_tilde * a_tilde * r);
     for (t, &yt) in y.iter().enumerate() {
         let ut = &u[t * m..(t + 1) * m];
         let bu = dot(b, ut);
@@ -46,7 +57,7 @@ pub(crate) fn loglik(
             p = a * a * p + q;
             continue;
         }
-        let ss = c * c * p + r;
+        let ss = c2 * p + r;
         if ss <= 0.0 {
             return Err(KalmanError::SingularInnovation {
                 record: record_index,
@@ -55,14 +66,13 @@ pub(crate) fn loglik(
             });
         }
         let inv = 1.0 / ss;
-        let e = yt - c * x - dot(d, ut) - h;
+        let z = yt - dot(d, ut) - h; // y - d u - h
+        let e = z - c * x;
         quad += e * e * inv;
         logdet.push(ss);
         observed += 1;
-        let xf = x + p * c * e * inv;
-        let pf = p * r * inv;
-        x = a * xf + bu + g * (yt - c * xf - dot(d, ut) - h);
-        p = a_tilde * a_tilde * pf + q_tilde;
+        x = (a_tilde * r * inv) * x + (a_tilde * p * c * inv + g) * z + bu;
+        p = ar2 * p * inv + q_tilde;
     }
     Ok(-0.5 * (observed as f64) * LN_2PI - 0.5 * logdet.ln() - 0.5 * quad)
 }

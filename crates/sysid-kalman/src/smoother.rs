@@ -3,6 +3,7 @@
 use crate::filter::Keep;
 use crate::{KalmanWorkspace, LinearGaussianModel, Record, Result, SufficientStatistics, dense};
 use nalgebra::{DMatrix, DVector, DVectorView};
+use sysid_linalg::dot;
 
 /// Smoothed moments of one record. Index `k = 0..=T` is time `t = k + 1`
 /// (`k = T` is `x_{T+1}` given all data).
@@ -14,6 +15,8 @@ pub struct SmootherOutput {
     pub(crate) mean: Vec<f64>,
     pub(crate) cov: Vec<f64>,
     pub(crate) lag_one: Vec<f64>,
+    /// whether `cov`/`lag_one` hold every step (false after a statistics-only pass)
+    pub(crate) stored_moments: bool,
 }
 
 impl SmootherOutput {
@@ -34,12 +37,27 @@ impl SmootherOutput {
         DVectorView::from_slice(&self.mean[k * self.n..(k + 1) * self.n], self.n)
     }
     /// Smoothed covariance `P_{k+1|T}`, `k` in `0..=T`.
+    ///
+    /// # Panics
+    /// After [`KalmanWorkspace::accumulate_statistics`], which keeps only the
+    /// statistics: call [`KalmanWorkspace::smooth`] for the moments.
     pub fn covariance(&self, k: usize) -> DMatrix<f64> {
+        assert!(
+            self.stored_moments,
+            "smoothed covariances were not stored by this pass"
+        );
         let nn = self.n * self.n;
         DMatrix::from_column_slice(self.n, self.n, &self.cov[k * nn..(k + 1) * nn])
     }
     /// Lag-one covariance `M_{k+1|T} = Cov(x_{k+2}, x_{k+1} | y_{1:T})`, `k` in `0..T`.
+    ///
+    /// # Panics
+    /// As [`covariance`](Self::covariance).
     pub fn lag_one_covariance(&self, k: usize) -> DMatrix<f64> {
+        assert!(
+            self.stored_moments,
+            "lag-one covariances were not stored by this pass"
+        );
         let nn = self.n * self.n;
         DMatrix::from_column_slice(self.n, self.n, &self.lag_one[k * nn..(k + 1) * nn])
     }
@@ -97,6 +115,9 @@ impl KalmanWorkspace {
         self.smooth_record(model, record, record_index, Some(stats))
     }
 
+    /// Backward pass. With `stats`, the EM statistics are accumulated step by step and
+    /// the smoothed covariances are kept only in rolling buffers (the statistics need
+    /// them once); without, every moment is stored for the accessors.
     pub(crate) fn smooth_record(
         &mut self,
         model: &LinearGaussianModel,
@@ -108,19 +129,30 @@ impl KalmanWorkspace {
         let n = model.n();
         let nn = n * n;
         let t_len = record.len();
+        let keep_moments = stats.is_none();
         let f = &self.filter;
         let s = &mut self.smoother;
         s.n = n;
         s.t_len = t_len;
         s.loglik = loglik;
         s.mean.resize((t_len + 1) * n, 0.0);
-        s.cov.resize((t_len + 1) * nn, 0.0);
-        s.lag_one.resize(t_len * nn, 0.0);
+        let (cov_len, lag_len) = if keep_moments {
+            ((t_len + 1) * nn, t_len * nn)
+        } else {
+            (2 * nn, nn)
+        };
+        s.cov.resize(cov_len, 0.0);
+        s.lag_one.resize(lag_len, 0.0);
+        s.stored_moments = keep_moments;
+        // slots of P_{t|T}, P_{t+1|T} and M_t in the stored or rolling buffers
+        let cov_slot = |t: usize| if keep_moments { t } else { t % 2 };
+        let lag_slot = |t: usize| if keep_moments { t } else { 0 };
         s.mean[t_len * n..].copy_from_slice(&f.pred_mean[t_len * n..]);
         {
             let u = &f.pred_factor[t_len * nn..];
+            let slot = cov_slot(t_len);
             dense::mul_tn(
-                &mut s.cov[t_len * nn..],
+                &mut s.cov[slot * nn..(slot + 1) * nn],
                 u,
                 u,
                 n,
@@ -130,6 +162,9 @@ impl KalmanWorkspace {
                 &mut self.scratch,
             );
         }
+        let mut sums = stats
+            .as_ref()
+            .map(|st| MomentSums::new(st.dim(), t_len, n, &mut self.sums_buf));
         let mut diff = vec![0.0; n];
         for t in (0..t_len).rev() {
             let jt = &f.gain_t[t * nn..(t + 1) * nn];
@@ -137,101 +172,127 @@ impl KalmanWorkspace {
                 *di = s.mean[(t + 1) * n + i] - f.pred_mean[(t + 1) * n + i];
             }
             for i in 0..n {
-                let dot: f64 = jt[i * n..(i + 1) * n]
-                    .iter()
-                    .zip(&diff)
-                    .map(|(a, b)| a * b)
-                    .sum();
-                s.mean[t * n + i] = f.filt_mean[t * n + i] + dot;
+                s.mean[t * n + i] = f.filt_mean[t * n + i] + dot(&jt[i * n..(i + 1) * n], &diff);
             }
-            let (head, tail) = s.cov.split_at_mut((t + 1) * nn);
-            let p_next = &tail[..nn];
-            let p_t = &mut head[t * nn..];
-            let lag = &mut s.lag_one[t * nn..(t + 1) * nn];
-            dense::mul_nn(lag, p_next, jt, n, n, n);
+            let (cur, next) = (cov_slot(t), cov_slot(t + 1));
+            let (p_t, p_next) = two_slots(&mut s.cov, cur, next, nn);
+            let lag = &mut s.lag_one[lag_slot(t) * nn..(lag_slot(t) + 1) * nn];
+            dense::mul_square(lag, p_next, jt, n, false, false, &mut self.scratch);
             let x33 = &f.cond_factor[t * nn..(t + 1) * nn];
-            dense::mul_tn(p_t, x33, x33, n, n, n, false, &mut self.scratch);
-            dense::mul_tn(p_t, jt, lag, n, n, n, true, &mut self.scratch);
+            dense::mul_square(p_t, x33, x33, n, true, false, &mut self.scratch);
+            dense::mul_square(p_t, jt, lag, n, true, true, &mut self.scratch);
             dense::symmetrize(p_t, n);
+            if let Some(sums) = sums.as_mut() {
+                sums.add_step(
+                    model,
+                    record,
+                    t,
+                    &s.mean[t * n..(t + 2) * n],
+                    p_t,
+                    p_next,
+                    lag,
+                );
+            }
         }
-        if let Some(stats) = stats {
-            add_statistics(model, record, &self.smoother, &mut self.scratch, stats);
+        if let (Some(stats), Some(sums)) = (stats, sums) {
+            let p1 = &s.cov[cov_slot(0) * nn..(cov_slot(0) + 1) * nn];
+            stats.observe_initial(&s.mean[..n], p1);
+            sums.finish(stats);
         }
         Ok(loglik)
     }
 }
 
-/// Adds the conditional moments of every `c_t = [x_t; u_t; 1; x_{t+1}; y_t]`: the
-/// conditional means go into a `T x dim` matrix `M` and the covariances are summed, so
-/// the statistics receive `sum_t Cov(c_t) + M'M` in one batch (one matrix product
-/// instead of `T` rank-one updates).
-fn add_statistics(
-    model: &LinearGaussianModel,
-    record: &Record,
-    sm: &SmootherOutput,
-    scratch: &mut Vec<f64>,
-    stats: &mut SufficientStatistics,
-) {
-    let (n, m, p) = (model.n(), model.m(), model.p());
-    let nn = n * n;
-    let dim = stats.dim();
-    let t_len = record.len();
-    let (ox, ou, o1, oxn, oy) = (0, n, n + m, n + m + 1, 2 * n + m + 1);
-    scratch.clear();
-    scratch.resize(t_len * dim + dim * dim + 3 * nn, 0.0);
-    let (means, rest) = scratch.split_at_mut(t_len * dim);
-    let (cov, sums) = rest.split_at_mut(dim * dim);
-    let (sum_p, rest) = sums.split_at_mut(nn);
-    let (sum_p_next, sum_lag) = rest.split_at_mut(nn);
-    stats.observe_initial(&sm.mean[..n], &sm.cov[..nn]);
-    // means: row t of the column-major T x dim matrix
-    let mut set = |t: usize, j: usize, v: f64| means[j * t_len + t] = v;
-    for t in 0..t_len {
+/// Mutable views of two distinct `nn`-sized slots of `buf`.
+fn two_slots(buf: &mut [f64], a: usize, b: usize, nn: usize) -> (&mut [f64], &mut [f64]) {
+    debug_assert_ne!(a, b);
+    if a < b {
+        let (lo, hi) = buf.split_at_mut(b * nn);
+        (&mut lo[a * nn..(a + 1) * nn], &mut hi[..nn])
+    } else {
+        let (lo, hi) = buf.split_at_mut(a * nn);
+        (&mut hi[..nn], &mut lo[b * nn..(b + 1) * nn])
+    }
+}
+
+/// Streaming accumulation of the EM statistics during the backward pass: the
+/// conditional means of `c_t = [x_t; u_t; 1; x_{t+1}; y_t]` go into a `T x dim` matrix
+/// `M` and the covariances are summed, so the statistics receive
+/// `sum_t Cov(c_t) + M'M` in one batch at the end (one matrix product instead of `T`
+/// rank-one updates).
+struct MomentSums<'a> {
+    dim: usize,
+    t_len: usize,
+    means: &'a mut [f64],
+    cov: &'a mut [f64],
+    sum_p: &'a mut [f64],
+    sum_p_next: &'a mut [f64],
+    sum_lag: &'a mut [f64],
+}
+
+impl<'a> MomentSums<'a> {
+    fn new(dim: usize, t_len: usize, n: usize, buf: &'a mut Vec<f64>) -> Self {
+        let nn = n * n;
+        buf.clear();
+        buf.resize(t_len * dim + dim * dim + 3 * nn, 0.0);
+        let (means, rest) = buf.split_at_mut(t_len * dim);
+        let (cov, rest) = rest.split_at_mut(dim * dim);
+        let (sum_p, rest) = rest.split_at_mut(nn);
+        let (sum_p_next, sum_lag) = rest.split_at_mut(nn);
+        MomentSums {
+            dim,
+            t_len,
+            means,
+            cov,
+            sum_p,
+            sum_p_next,
+            sum_lag,
+        }
+    }
+
+    /// Adds step `t`; `x` holds `[x_{t|T}; x_{t+1|T}]`.
+    #[allow(clippy::too_many_arguments)]
+    fn add_step(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        t: usize,
+        x: &[f64],
+        p_t: &[f64],
+        p_next: &[f64],
+        lag: &[f64],
+    ) {
+        let (n, m, p) = (model.n(), model.m(), model.p());
+        let (dim, t_len) = (self.dim, self.t_len);
+        let (ou, o1, oxn, oy) = (n, n + m, n + m + 1, 2 * n + m + 1);
+        let means = &mut *self.means;
         for i in 0..n {
-            set(t, ox + i, sm.mean[t * n + i]);
-            set(t, oxn + i, sm.mean[(t + 1) * n + i]);
+            means[i * t_len + t] = x[i];
+            means[(oxn + i) * t_len + t] = x[n + i];
         }
         for i in 0..m {
-            set(t, ou + i, record.u[(i, t)]);
+            means[(ou + i) * t_len + t] = record.u[(i, t)];
         }
-        set(t, o1, 1.0);
-        for i in 0..p {
-            set(t, oy + i, record.y[(i, t)]);
-        }
-    }
-    for t in 0..t_len {
-        for (acc, v) in sum_p.iter_mut().zip(&sm.cov[t * nn..(t + 1) * nn]) {
-            *acc += v;
-        }
-        for (acc, v) in sum_p_next
-            .iter_mut()
-            .zip(&sm.cov[(t + 1) * nn..(t + 2) * nn])
-        {
-            *acc += v;
-        }
-        for (acc, v) in sum_lag.iter_mut().zip(&sm.lag_one[t * nn..(t + 1) * nn]) {
-            *acc += v;
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            cov[(ox + j) * dim + ox + i] = sum_p[j * n + i];
-            cov[(oxn + j) * dim + oxn + i] = sum_p_next[j * n + i];
-            cov[(ox + j) * dim + oxn + i] = sum_lag[j * n + i]; // Cov(x_{t+1,i}, x_{t,j})
-            cov[(oxn + j) * dim + ox + i] = sum_lag[i * n + j];
-        }
-    }
-    // missing outputs: exact conditional moments through (x_t, x_{t+1})
-    for t in 0..t_len {
+        means[o1 * t_len + t] = 1.0;
         let y_t = record.y.column(t);
-        if !y_t.iter().any(|v| v.is_nan()) {
-            continue;
+        for i in 0..p {
+            means[(oy + i) * t_len + t] = y_t[i];
         }
+        for (acc, v) in self.sum_p.iter_mut().zip(p_t) {
+            *acc += v;
+        }
+        for (acc, v) in self.sum_p_next.iter_mut().zip(p_next) {
+            *acc += v;
+        }
+        for (acc, v) in self.sum_lag.iter_mut().zip(lag) {
+            *acc += v;
+        }
+        if !y_t.iter().any(|v| v.is_nan()) {
+            return;
+        }
+        // missing outputs: exact conditional moments through (x_t, x_{t+1})
         let cond = missing_output_conditional(model, record.u.column(t).as_slice(), y_t.as_slice());
         let mut joint = DMatrix::zeros(2 * n, 2 * n);
-        let p_t = &sm.cov[t * nn..(t + 1) * nn];
-        let p_next = &sm.cov[(t + 1) * nn..(t + 2) * nn];
-        let lag = &sm.lag_one[t * nn..(t + 1) * nn];
         for j in 0..n {
             for i in 0..n {
                 joint[(i, j)] = p_t[j * n + i];
@@ -240,14 +301,15 @@ fn add_statistics(
                 joint[(j, n + i)] = lag[j * n + i];
             }
         }
-        let xs = DVector::from_fn(2 * n, |i, _| sm.mean[t * n + i]);
+        let xs = DVector::from_column_slice(x);
         let y_mean = &cond.gain * &xs + &cond.offset;
         let cross = &cond.gain * &joint; // Cov(y_mis, (x_t, x_{t+1}))
         let y_cov = &cross * cond.gain.transpose() + &cond.residual_cov;
+        let cov = &mut *self.cov;
         for (a, &yi) in cond.missing.iter().enumerate() {
             means[(oy + yi) * t_len + t] = y_mean[a];
             for j in 0..2 * n {
-                let cj = if j < n { ox + j } else { oxn + j - n };
+                let cj = if j < n { j } else { oxn + j - n };
                 cov[cj * dim + oy + yi] += cross[(a, j)];
                 cov[(oy + yi) * dim + cj] += cross[(a, j)];
             }
@@ -256,7 +318,22 @@ fn add_statistics(
             }
         }
     }
-    stats.observe_batch(means, t_len, cov);
+
+    /// Writes the summed state covariances into the `dim x dim` sum and hands the batch
+    /// to `stats`.
+    fn finish(self, stats: &mut SufficientStatistics) {
+        let n = self.sum_p.len().isqrt();
+        let (dim, oxn) = (self.dim, stats.xi_range().start);
+        for j in 0..n {
+            for i in 0..n {
+                self.cov[j * dim + i] += self.sum_p[j * n + i];
+                self.cov[(oxn + j) * dim + oxn + i] += self.sum_p_next[j * n + i];
+                self.cov[j * dim + oxn + i] += self.sum_lag[j * n + i]; // Cov(x_{t+1,i}, x_{t,j})
+                self.cov[(oxn + j) * dim + i] += self.sum_lag[i * n + j];
+            }
+        }
+        stats.observe_batch(self.means, self.t_len, self.cov);
+    }
 }
 
 /// `y_mis = gain [x_t; x_{t+1}] + offset + nu`, `nu ~ N(0, residual_cov)` independent

@@ -69,11 +69,20 @@ pub fn run(reps: usize, only: Option<&str>) {
         .iter()
         .filter(|c| only.is_none_or(|s| s == c.system.name()))
     {
-        let model = case.system.model();
         let sim = case
             .system
             .simulate(case.steps, 1)
             .expect("canonical systems simulate");
+        let mut model = case.system.model();
+        if case.full_noise {
+            let n = model.n();
+            model = model
+                .to_builder()
+                .q(DMatrix::identity(n, n) * 0.01)
+                .p1(DMatrix::identity(n, n))
+                .build()
+                .expect("valid variant");
+        }
         let mut ws = KalmanWorkspace::new();
         let mut stats = SufficientStatistics::new(model.n(), model.m(), model.p());
         let mut once = || -> f64 {

@@ -43,6 +43,16 @@ fn main() {
     }
 }
 
+/// Prints one JSON line; a closed stdout (e.g. `| head -1`) ends the program quietly,
+/// as for any Unix filter, instead of panicking.
+pub fn emit(value: &serde_json::Value) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if writeln!(out, "{value}").and_then(|_| out.flush()).is_err() {
+        std::process::exit(0);
+    }
+}
+
 /// Median, minimum and maximum of a sample (sorted in place).
 pub fn summary(samples: &mut [f64]) -> (f64, f64, f64) {
     samples.sort_by(f64::total_cmp);

@@ -99,6 +99,16 @@ enum Command {
     },
 }
 
+/// Prints one line on stdout; a closed stdout (e.g. `| head -1`) ends the program
+/// quietly, as for any Unix filter, instead of panicking.
+pub fn say(line: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if writeln!(out, "{line}").and_then(|_| out.flush()).is_err() {
+        std::process::exit(0);
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {

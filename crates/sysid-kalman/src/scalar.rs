@@ -24,6 +24,7 @@ pub(crate) fn loglik(
     model: &LinearGaussianModel,
     record: &Record,
     record_index: usize,
+    reuse_steady_state: bool,
 ) -> Result<f64> {
     let m = model.m();
     let (a, c, q, r, s, h) = (
@@ -49,30 +50,41 @@ pub(crate) fn loglik(
     // and the mean update is one multiply-add on its chain:
     //   x' = (a~ r / S) x + a~ P c (y - d u - h) / S + b u + g (y - d u - h).
     let (c2, ar2) = (c * c, a_tilde * a_tilde * r);
+    // Once P has settled (a change below 16 eps relative: what its own rounding
+    // resolves), the step coefficients are reused: no division on the chain.
+    let mut steady = false;
+    let (mut ss, mut inv, mut x_coef, mut z_coef) = (0.0, 0.0, 0.0, 0.0);
     for (t, &yt) in y.iter().enumerate() {
         let ut = &u[t * m..(t + 1) * m];
         let bu = dot(b, ut);
         if yt.is_nan() {
             x = a * x + bu;
             p = a * a * p + q;
+            steady = false;
             continue;
         }
-        let ss = c2 * p + r;
-        if ss <= 0.0 {
-            return Err(KalmanError::SingularInnovation {
-                record: record_index,
-                time: t + 1,
-                output: 1,
-            });
+        if !steady {
+            ss = c2 * p + r;
+            if ss <= 0.0 {
+                return Err(KalmanError::SingularInnovation {
+                    record: record_index,
+                    time: t + 1,
+                    output: 1,
+                });
+            }
+            inv = 1.0 / ss;
+            x_coef = a_tilde * r * inv;
+            z_coef = a_tilde * p * c * inv + g;
+            let p_next = ar2 * p * inv + q_tilde;
+            steady = reuse_steady_state && (p_next - p).abs() <= 16.0 * f64::EPSILON * p.abs();
+            p = p_next;
         }
-        let inv = 1.0 / ss;
         let z = yt - dot(d, ut) - h; // y - d u - h
         let e = z - c * x;
         quad += e * e * inv;
         logdet.push(ss);
         observed += 1;
-        x = (a_tilde * r * inv) * x + (a_tilde * p * c * inv + g) * z + bu;
-        p = ar2 * p * inv + q_tilde;
+        x = x_coef * x + z_coef * z + bu;
     }
     Ok(-0.5 * (observed as f64) * LN_2PI - 0.5 * logdet.ln() - 0.5 * quad)
 }

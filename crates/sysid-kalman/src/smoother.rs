@@ -175,13 +175,34 @@ impl KalmanWorkspace {
                 s.mean[t * n + i] = f.filt_mean[t * n + i] + dot(&jt[i * n..(i + 1) * n], &diff);
             }
             let (cur, next) = (cov_slot(t), cov_slot(t + 1));
+            // Steady state: if step t+1 reused the forward factor (same J and X33) and
+            // P_{t+1|T} has settled (equals P_{t+2|T} to round-off), P_{t|T} and M_t are
+            // taken equal to P_{t+1|T} and M_{t+1}. In the rolling buffers they are
+            // already in place.
+            let reuse = t + 1 < t_len && f.reused[t + 1] && {
+                let after = if keep_moments { t + 2 } else { cur };
+                crate::filter::settled(
+                    &s.cov[after * nn..(after + 1) * nn],
+                    &s.cov[next * nn..(next + 1) * nn],
+                    n,
+                )
+            };
+            if reuse {
+                if keep_moments {
+                    s.cov.copy_within((t + 1) * nn..(t + 2) * nn, t * nn);
+                    s.lag_one.copy_within((t + 1) * nn..(t + 2) * nn, t * nn);
+                }
+            } else {
+                let (p_t, p_next) = two_slots(&mut s.cov, cur, next, nn);
+                let lag = &mut s.lag_one[lag_slot(t) * nn..(lag_slot(t) + 1) * nn];
+                dense::mul_square(lag, p_next, jt, n, false, false, &mut self.scratch);
+                let x33 = &f.cond_factor[t * nn..(t + 1) * nn];
+                dense::mul_square(p_t, x33, x33, n, true, false, &mut self.scratch);
+                dense::mul_square(p_t, jt, lag, n, true, true, &mut self.scratch);
+                dense::symmetrize(p_t, n);
+            }
             let (p_t, p_next) = two_slots(&mut s.cov, cur, next, nn);
-            let lag = &mut s.lag_one[lag_slot(t) * nn..(lag_slot(t) + 1) * nn];
-            dense::mul_square(lag, p_next, jt, n, false, false, &mut self.scratch);
-            let x33 = &f.cond_factor[t * nn..(t + 1) * nn];
-            dense::mul_square(p_t, x33, x33, n, true, false, &mut self.scratch);
-            dense::mul_square(p_t, jt, lag, n, true, true, &mut self.scratch);
-            dense::symmetrize(p_t, n);
+            let lag = &s.lag_one[lag_slot(t) * nn..(lag_slot(t) + 1) * nn];
             if let Some(sums) = sums.as_mut() {
                 sums.add_step(
                     model,

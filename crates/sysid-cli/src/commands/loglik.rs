@@ -16,9 +16,9 @@ pub fn run(model_path: &Path, data: &DataArgs, json: bool) -> Result<(), CliErro
             "observed_values": observed, "missing_values": file.record.y.len() - observed,
             "outputs": file.output_names, "inputs": file.input_names,
         });
-        println!("{out}");
+        crate::say(&out.to_string());
     } else {
-        println!("{loglik}");
+        crate::say(&loglik.to_string());
     }
     Ok(())
 }

@@ -60,14 +60,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             "command": "simulate", "system": system.name(), "steps": o.steps, "seed": o.seed,
             "out": o.out, "model_out": o.model_out,
         });
-        println!("{summary}");
+        crate::say(&summary.to_string());
     } else {
-        println!(
+        crate::say(&format!(
             "wrote {} steps of {} to {}",
             o.steps,
             system.name(),
             o.out.display()
-        );
+        ));
     }
     Ok(())
 }

@@ -40,13 +40,13 @@ pub fn run(
         let s = serde_json::json!({
             "command": "smooth", "loglik": sm.loglik(), "steps": sm.len(), "states": n, "out": out,
         });
-        println!("{s}");
+        crate::say(&s.to_string());
     } else {
-        println!(
+        crate::say(&format!(
             "loglik {}; wrote smoothed states to {}",
             sm.loglik(),
             out.display()
-        );
+        ));
     }
     Ok(())
 }

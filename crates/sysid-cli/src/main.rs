@@ -44,31 +44,7 @@ pub struct DataArgs {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Simulate a canonical system and write its data as CSV (t, u1.., y1.., [x1..]).
-    Simulate {
-        /// System name: lgss or lti2x2.
-        system: String,
-        /// Number of time steps.
-        #[arg(long, default_value_t = 1000)]
-        steps: usize,
-        /// Seed of the random generator (Xoshiro256++).
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Output CSV file.
-        #[arg(long)]
-        out: PathBuf,
-        /// Also write the true states x1..xn.
-        #[arg(long)]
-        states: bool,
-        /// Also write the true model as JSON to this file.
-        #[arg(long)]
-        model_out: Option<PathBuf>,
-        /// Replace existing output files.
-        #[arg(long)]
-        force: bool,
-        /// Print a machine-readable summary.
-        #[arg(long)]
-        json: bool,
-    },
+    Simulate(commands::simulate::Options),
     /// Print the exact log-likelihood of data under a model (square-root Kalman filter).
     Loglik {
         /// Model file (JSON, see docs/model-format.md).
@@ -112,25 +88,7 @@ pub fn say(line: &str) {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Simulate {
-            system,
-            steps,
-            seed,
-            out,
-            states,
-            model_out,
-            force,
-            json,
-        } => commands::simulate::run(&commands::simulate::Options {
-            system,
-            steps,
-            seed,
-            out,
-            states,
-            model_out,
-            force,
-            json,
-        }),
+        Command::Simulate(options) => commands::simulate::run(&options),
         Command::Loglik { model, data, json } => commands::loglik::run(&model, &data, json),
         Command::Smooth {
             model,

@@ -134,3 +134,13 @@ fn square_kernel<const N: usize>(
         c[j * N..(j + 1) * N].copy_from_slice(&out);
     }
 }
+
+/// Step `k` of a buffer that stores `n`-vectors one after another.
+pub(crate) fn vector_at(buf: &[f64], k: usize, n: usize) -> nalgebra::DVectorView<'_, f64> {
+    nalgebra::DVectorView::from_slice(&buf[k * n..(k + 1) * n], n)
+}
+
+/// Step `k` of a buffer that stores column-major `n x n` matrices one after another.
+pub(crate) fn matrix_at(buf: &[f64], k: usize, n: usize) -> nalgebra::DMatrix<f64> {
+    nalgebra::DMatrix::from_column_slice(n, n, &buf[k * n * n..(k + 1) * n * n])
+}

@@ -59,7 +59,7 @@ impl FilterOutput {
     }
     /// Predicted mean `x_{k+1|k}` (index `k` in `0..=T`).
     pub fn predicted_mean(&self, k: usize) -> DVectorView<'_, f64> {
-        DVectorView::from_slice(&self.pred_mean[k * self.n..(k + 1) * self.n], self.n)
+        dense::vector_at(&self.pred_mean, k, self.n)
     }
     /// Predicted covariance `P_{k+1|k}` (index `k` in `0..=T`), symmetric PSD by
     /// construction (`U'U`).
@@ -72,7 +72,7 @@ impl FilterOutput {
     }
     /// Filtered mean `x_{k+1|k+1}` (index `k` in `0..T`).
     pub fn filtered_mean(&self, k: usize) -> DVectorView<'_, f64> {
-        DVectorView::from_slice(&self.filt_mean[k * self.n..(k + 1) * self.n], self.n)
+        dense::vector_at(&self.filt_mean, k, self.n)
     }
     /// Filtered covariance `P_{k+1|k+1} = X33'X33 + J P_{k+2|k+1} J'` (index `k` in
     /// `0..T`): a sum of PSD terms.

@@ -142,56 +142,27 @@ pub struct ModelBuilder {
     p1: Option<DMatrix<f64>>,
 }
 
+macro_rules! setters {
+    ($($name:ident: $ty:ty, $wrap:expr, $doc:literal;)*) => {
+        $(#[doc = $doc] pub fn $name(mut self, $name: $ty) -> Self {
+            self.$name = $wrap($name);
+            self
+        })*
+    };
+}
+
 impl ModelBuilder {
-    /// Sets the input matrix `B` (n x m); `D` defaults to zero if not set.
-    pub fn b(mut self, b: DMatrix<f64>) -> Self {
-        self.b = Some(b);
-        self
-    }
-    /// Sets the feed-through matrix `D` (p x m); `B` defaults to zero if not set.
-    pub fn d(mut self, d: DMatrix<f64>) -> Self {
-        self.d = Some(d);
-        self
-    }
-    /// Sets the cross-covariance `S = Cov(w_t, e_t)` (n x p).
-    pub fn s(mut self, s: DMatrix<f64>) -> Self {
-        self.s = Some(s);
-        self
-    }
-    /// Sets the output offset `h` (p).
-    pub fn h(mut self, h: DVector<f64>) -> Self {
-        self.h = Some(h);
-        self
-    }
-    /// Sets the initial state mean `mu` (n).
-    pub fn mu(mut self, mu: DVector<f64>) -> Self {
-        self.mu = Some(mu);
-        self
-    }
-    /// Sets the initial state covariance `P1` (n x n, PSD).
-    pub fn p1(mut self, p1: DMatrix<f64>) -> Self {
-        self.p1 = Some(p1);
-        self
-    }
-    /// Replaces `A`.
-    pub fn a(mut self, a: DMatrix<f64>) -> Self {
-        self.a = a;
-        self
-    }
-    /// Replaces `C`.
-    pub fn c(mut self, c: DMatrix<f64>) -> Self {
-        self.c = c;
-        self
-    }
-    /// Replaces `Q`.
-    pub fn q(mut self, q: DMatrix<f64>) -> Self {
-        self.q = q;
-        self
-    }
-    /// Replaces `R`.
-    pub fn r(mut self, r: DMatrix<f64>) -> Self {
-        self.r = r;
-        self
+    setters! {
+        b: DMatrix<f64>, Some, "Sets the input matrix `B` (n x m); `D` defaults to zero if not set.";
+        d: DMatrix<f64>, Some, "Sets the feed-through matrix `D` (p x m); `B` defaults to zero if not set.";
+        s: DMatrix<f64>, Some, "Sets the cross-covariance `S = Cov(w_t, e_t)` (n x p).";
+        h: DVector<f64>, Some, "Sets the output offset `h` (p).";
+        mu: DVector<f64>, Some, "Sets the initial state mean `mu` (n).";
+        p1: DMatrix<f64>, Some, "Sets the initial state covariance `P1` (n x n, PSD).";
+        a: DMatrix<f64>, std::convert::identity, "Replaces `A`.";
+        c: DMatrix<f64>, std::convert::identity, "Replaces `C`.";
+        q: DMatrix<f64>, std::convert::identity, "Replaces `Q`.";
+        r: DMatrix<f64>, std::convert::identity, "Replaces `R`.";
     }
 
     /// Validates and builds the model.

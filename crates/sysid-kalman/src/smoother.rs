@@ -34,7 +34,7 @@ impl SmootherOutput {
     }
     /// Smoothed mean `x_{k+1|T}`, `k` in `0..=T`.
     pub fn mean(&self, k: usize) -> DVectorView<'_, f64> {
-        DVectorView::from_slice(&self.mean[k * self.n..(k + 1) * self.n], self.n)
+        dense::vector_at(&self.mean, k, self.n)
     }
     /// Smoothed covariance `P_{k+1|T}`, `k` in `0..=T`.
     ///
@@ -46,8 +46,7 @@ impl SmootherOutput {
             self.stored_moments,
             "smoothed covariances were not stored by this pass"
         );
-        let nn = self.n * self.n;
-        DMatrix::from_column_slice(self.n, self.n, &self.cov[k * nn..(k + 1) * nn])
+        dense::matrix_at(&self.cov, k, self.n)
     }
     /// Lag-one covariance `M_{k+1|T} = Cov(x_{k+2}, x_{k+1} | y_{1:T})`, `k` in `0..T`.
     ///
@@ -58,8 +57,7 @@ impl SmootherOutput {
             self.stored_moments,
             "lag-one covariances were not stored by this pass"
         );
-        let nn = self.n * self.n;
-        DMatrix::from_column_slice(self.n, self.n, &self.lag_one[k * nn..(k + 1) * nn])
+        dense::matrix_at(&self.lag_one, k, self.n)
     }
 }
 

@@ -5,14 +5,31 @@ use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
 use sysid::models::System;
 
+/// Options of `sysid simulate`.
+#[derive(clap::Args, Debug)]
 pub struct Options {
+    /// System name: lgss or lti2x2.
     pub system: String,
+    /// Number of time steps.
+    #[arg(long, default_value_t = 1000)]
     pub steps: usize,
+    /// Seed of the random generator (Xoshiro256++).
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Output CSV file.
+    #[arg(long)]
     pub out: PathBuf,
+    /// Also write the true states x1..xn.
+    #[arg(long)]
     pub states: bool,
+    /// Also write the true model as JSON to this file.
+    #[arg(long)]
     pub model_out: Option<PathBuf>,
+    /// Replace existing output files.
+    #[arg(long)]
     pub force: bool,
+    /// Print a machine-readable summary.
+    #[arg(long)]
     pub json: bool,
 }
 

@@ -1,0 +1,314 @@
+//! The EM runner: one loop for every EM variant.
+//!
+//! # Algorithm
+//! An algorithm supplies [`EmAlgorithm::step`]: from the current estimate `theta_k` it
+//! runs the E-step (which yields `l_k = log p(y | theta_k)`) and the M-step, returning
+//! `theta_{k+1}`. The runner owns everything else: the iteration limit, the stopping
+//! rule of Blocker (2008),
+//! ```text
+//! (l_k - l_{k-1}) / (0.5 |l_k + l_{k-1}| + eps) < tol,
+//! ```
+//! the log-likelihood trace, the monotonicity check and the observers. For exact EM
+//! a decrease beyond `monotonicity_tol * |l_{k-1}|` stops the run with
+//! [`Termination::LikelihoodDecreased`] and returns the previous (better) estimate:
+//! such a decrease is a bug to report, never a step to take silently. For noisy
+//! (particle) E-steps the decreases are counted instead.
+
+use std::time::{Duration, Instant};
+
+/// One EM variant: the E-step and the M-step.
+pub trait EmAlgorithm {
+    /// The parameter estimate.
+    type Estimate: Clone;
+    /// What a step can fail with.
+    type Error;
+
+    /// Runs the E-step at `current` and the M-step; returns the new estimate and
+    /// `log p(y | current)`.
+    fn step(&mut self, current: &Self::Estimate) -> Result<(Self::Estimate, f64), Self::Error>;
+
+    /// `log p(y | estimate)` (an E-step without the M-step), for the final estimate.
+    fn loglik(&mut self, estimate: &Self::Estimate) -> Result<f64, Self::Error>;
+
+    /// Whether the E-step is exact, so that the likelihood must never decrease.
+    fn is_exact(&self) -> bool {
+        true
+    }
+}
+
+/// Why the runner stopped.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Termination<E> {
+    /// The relative log-likelihood change fell below the tolerance.
+    Converged,
+    /// The iteration limit was reached.
+    MaxIterations,
+    /// Exact EM decreased the log-likelihood (a bug): the run stopped and returned the
+    /// estimate before the decrease.
+    LikelihoodDecreased {
+        /// Iteration whose M-step produced the worse estimate.
+        iteration: usize,
+        /// Log-likelihood before.
+        previous: f64,
+        /// Log-likelihood after.
+        current: f64,
+    },
+    /// A step failed; the estimate is the last one that succeeded.
+    Error {
+        /// Iteration that failed (1-based).
+        iteration: usize,
+        /// The failure.
+        error: E,
+    },
+}
+
+/// Options of the runner, validated by [`EmOptions::check`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct EmOptions {
+    /// Maximum number of iterations (M-steps). Default 1000.
+    pub max_iterations: usize,
+    /// Tolerance of the relative stopping rule; `0` runs exactly `max_iterations`.
+    /// Default 1e-6.
+    pub tol: f64,
+    /// Exact EM stops when `l_k < l_{k-1} - monotonicity_tol |l_{k-1}|`. Default 1e-10.
+    pub monotonicity_tol: f64,
+}
+
+impl Default for EmOptions {
+    fn default() -> Self {
+        EmOptions {
+            max_iterations: 1000,
+            tol: 1e-6,
+            monotonicity_tol: 1e-10,
+        }
+    }
+}
+
+/// Invalid runner options.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum OptionsError {
+    /// `max_iterations` is zero.
+    #[error("max_iterations must be at least 1")]
+    NoIterations,
+    /// A tolerance is negative or not finite.
+    #[error("{name} must be a finite non-negative number, got {value}")]
+    BadTolerance { name: &'static str, value: f64 },
+}
+
+impl EmOptions {
+    /// Validates the options.
+    pub fn check(self) -> Result<EmOptions, OptionsError> {
+        if self.max_iterations == 0 {
+            return Err(OptionsError::NoIterations);
+        }
+        for (name, value) in [
+            ("tol", self.tol),
+            ("monotonicity_tol", self.monotonicity_tol),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(OptionsError::BadTolerance { name, value });
+            }
+        }
+        Ok(self)
+    }
+}
+
+/// What observers see after every iteration.
+#[derive(Debug)]
+pub struct IterationInfo<'a, T> {
+    /// Iteration number, 1-based.
+    pub iteration: usize,
+    /// `log p(y | theta_{k-1})`, computed by this iteration's E-step.
+    pub loglik: f64,
+    /// The new estimate `theta_k`.
+    pub estimate: &'a T,
+    /// Time since the run started.
+    pub elapsed: Duration,
+}
+
+/// Watches a run (progress bars, CSV traces, logging). Every method has a default.
+pub trait EmObserver<T> {
+    /// Called after every iteration.
+    fn iteration(&mut self, _info: &IterationInfo<'_, T>) {}
+}
+
+/// The observer that does nothing.
+impl<T> EmObserver<T> for () {}
+
+/// The result of a run.
+#[derive(Debug, Clone)]
+pub struct EmResult<T, E> {
+    /// The final estimate: the last one whose log-likelihood is known and that did not
+    /// decrease it (see [`Termination`]).
+    pub estimate: T,
+    /// `log p(y | estimate)`; `None` only if no log-likelihood could be computed (the
+    /// first E-step failed).
+    pub loglik: Option<f64>,
+    /// `trace[k] = log p(y | theta_k)` for every estimate evaluated, `theta_0` the
+    /// initial one (a rejected estimate's value included, as the last entry).
+    pub trace: Vec<f64>,
+    /// Number of M-steps that produced `estimate`.
+    pub iterations: usize,
+    /// Why the run stopped.
+    pub termination: Termination<E>,
+    /// Number of iterations whose log-likelihood decreased beyond the tolerance: for
+    /// noisy E-steps a statistic, for exact EM at most one (the one that stopped it).
+    pub decreases: usize,
+    /// Wall-clock time of the run.
+    pub elapsed: Duration,
+}
+
+/// The seed-002 relative change `(l - l_prev) / (0.5 |l + l_prev| + eps)`.
+pub fn relative_change(l: f64, l_prev: f64) -> f64 {
+    (l - l_prev) / (0.5 * (l + l_prev).abs() + f64::EPSILON)
+}
+
+/// Runs EM from `initial`.
+///
+/// # Example
+/// ```
+/// use sysid_em::{EmAlgorithm, EmOptions, Termination, run_em};
+/// // a toy "EM" that halves the distance to 3 and whose likelihood is -(x - 3)^2
+/// struct Toy;
+/// impl EmAlgorithm for Toy {
+///     type Estimate = f64;
+///     type Error = ();
+///     fn step(&mut self, x: &f64) -> Result<(f64, f64), ()> { Ok(((x + 3.0) / 2.0, -(x - 3.0).powi(2))) }
+///     fn loglik(&mut self, x: &f64) -> Result<f64, ()> { Ok(-(x - 3.0).powi(2)) }
+/// }
+/// let options = EmOptions { max_iterations: 60, tol: 0.0, ..EmOptions::default() }.check().unwrap();
+/// let result = run_em(&mut Toy, 1.0, &options, &mut ());
+/// assert_eq!(result.termination, Termination::MaxIterations);
+/// assert!((result.estimate - 3.0).abs() < 1e-12);
+/// assert_eq!(result.trace.len(), 61);
+/// ```
+pub fn run_em<A: EmAlgorithm>(
+    algorithm: &mut A,
+    initial: A::Estimate,
+    options: &EmOptions,
+    observer: &mut impl EmObserver<A::Estimate>,
+) -> EmResult<A::Estimate, A::Error> {
+    let start = Instant::now();
+    let exact = algorithm.is_exact();
+    // theta_{k-1} (current) and theta_{k-2} (previous), trace[j] = l(theta_j)
+    let mut current = initial;
+    let mut previous: Option<A::Estimate> = None;
+    let mut trace: Vec<f64> = Vec::new();
+    let mut decreases = 0;
+    let result = |estimate, loglik, trace, iterations, termination, decreases| EmResult {
+        estimate,
+        loglik,
+        trace,
+        iterations,
+        termination,
+        decreases,
+        elapsed: start.elapsed(),
+    };
+    for iteration in 1..=options.max_iterations {
+        let (next, l_current) = match algorithm.step(&current) {
+            Ok(v) => v,
+            Err(error) => {
+                // theta_{k-1}'s log-likelihood is unknown: return theta_{k-2} if any
+                let termination = Termination::Error { iteration, error };
+                let loglik = trace.last().copied();
+                return match previous {
+                    Some(p) => result(p, loglik, trace, iteration - 2, termination, decreases),
+                    None => result(current, None, trace, 0, termination, decreases),
+                };
+            }
+        };
+        trace.push(l_current);
+        if let [.., l_prev, _] = trace[..] {
+            if l_current < l_prev - options.monotonicity_tol * l_prev.abs() {
+                decreases += 1;
+                if exact {
+                    let termination = Termination::LikelihoodDecreased {
+                        iteration: iteration - 1,
+                        previous: l_prev,
+                        current: l_current,
+                    };
+                    let estimate = previous.expect("a decrease needs two evaluated estimates");
+                    return result(
+                        estimate,
+                        Some(l_prev),
+                        trace,
+                        iteration - 2,
+                        termination,
+                        decreases,
+                    );
+                }
+            }
+            if options.tol > 0.0 && relative_change(l_current, l_prev).abs() < options.tol {
+                let termination = Termination::Converged;
+                return result(
+                    current,
+                    Some(l_current),
+                    trace,
+                    iteration - 1,
+                    termination,
+                    decreases,
+                );
+            }
+        }
+        observer.iteration(&IterationInfo {
+            iteration,
+            loglik: l_current,
+            estimate: &next,
+            elapsed: start.elapsed(),
+        });
+        previous = Some(std::mem::replace(&mut current, next));
+    }
+    // the iteration limit: evaluate the last estimate
+    let iterations = options.max_iterations;
+    match algorithm.loglik(&current) {
+        Ok(l) => {
+            let l_prev = *trace.last().expect("at least one iteration ran");
+            trace.push(l);
+            if l < l_prev - options.monotonicity_tol * l_prev.abs() {
+                decreases += 1;
+                if exact {
+                    let termination = Termination::LikelihoodDecreased {
+                        iteration: iterations,
+                        previous: l_prev,
+                        current: l,
+                    };
+                    let estimate = previous.expect("at least one iteration ran");
+                    return result(
+                        estimate,
+                        Some(l_prev),
+                        trace,
+                        iterations - 1,
+                        termination,
+                        decreases,
+                    );
+                }
+            }
+            result(
+                current,
+                Some(l),
+                trace,
+                iterations,
+                Termination::MaxIterations,
+                decreases,
+            )
+        }
+        Err(error) => {
+            let termination = Termination::Error {
+                iteration: iterations + 1,
+                error,
+            };
+            let estimate = previous.expect("at least one iteration ran");
+            let loglik = trace.last().copied();
+            result(
+                estimate,
+                loglik,
+                trace,
+                iterations - 1,
+                termination,
+                decreases,
+            )
+        }
+    }
+}

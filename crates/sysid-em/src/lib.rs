@@ -4,6 +4,7 @@
 //!   that every variant uses;
 //! * [`linear`]: exact EM for linear Gaussian models with a closed-form M-step.
 
+pub mod linear;
 pub mod runner;
 
 pub use runner::{

@@ -1,0 +1,168 @@
+//! Exact EM for linear Gaussian state-space models (Shumway and Stoffer 1982; Gibson
+//! and Ninness 2005; Blocker 2008).
+//!
+//! # Model
+//! ```text
+//! x_{t+1} = A x_t + B u_t + w_t,   y_t = C x_t + D u_t + h + e_t
+//! w_t ~ N(0, Q),  e_t ~ N(0, R),  x_1 ~ N(mu, P1)
+//! ```
+//! with several independent records and missing outputs (NaN) allowed.
+//!
+//! # Algorithm
+//! E-step: the square-root Kalman smoother's statistics
+//! `H = sum_t E{c_t c_t' | y}`, `c_t = [x_t; u_t; 1; x_{t+1}; y_t]`
+//! ([`sysid_kalman::SufficientStatistics`]). M-step: [`m_step`], closed form by the
+//! Cholesky route. The [`crate::run_em`] runner owns the loop; exact EM must never
+//! decrease the likelihood, and a decrease stops the run as
+//! [`crate::Termination::LikelihoodDecreased`].
+//!
+//! # Complexity
+//! One iteration costs one filter + smoother pass with statistics,
+//! `O(T (n + p)^3)`, and an `O((2n + m + p)^3)` M-step.
+//!
+//! # References
+//! Shumway and Stoffer, J. Time Series Analysis 3 (1982); Gibson and Ninness,
+//! Automatica 41 (2005); Blocker (2008).
+
+mod mstep;
+mod spec;
+
+pub use mstep::m_step;
+pub use spec::{Covariance, LinearEmSpec};
+
+use crate::{EmAlgorithm, EmObserver, EmOptions, EmResult, run_em};
+use sysid_kalman::{
+    KalmanError, KalmanWorkspace, LinearGaussianModel, Record, SufficientStatistics,
+};
+
+/// Errors of linear EM.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum LinearEmError {
+    /// The E-step (filter/smoother) failed.
+    #[error("E-step: {0}")]
+    Kalman(#[from] KalmanError),
+    /// A matrix of the M-step failed a check.
+    #[error("M-step: {0}")]
+    Linalg(#[from] sysid_linalg::LinalgError),
+    /// The data set has no record or no step.
+    #[error("the data set has no time steps")]
+    NoSteps,
+    /// A combination of fixed and free parameters that this M-step does not handle.
+    #[error("unsupported: {0}")]
+    Unsupported(String),
+    /// The starting model is outside the parameter set of the spec.
+    #[error("initial model: {matrix} {reason}")]
+    InitialNotInSpec {
+        matrix: &'static str,
+        reason: &'static str,
+    },
+}
+
+/// Linear EM over a data set of independent records (an [`EmAlgorithm`]).
+pub struct LinearEm<'a> {
+    records: &'a [Record],
+    spec: LinearEmSpec,
+    workspace: KalmanWorkspace,
+}
+
+impl<'a> LinearEm<'a> {
+    /// EM on `records` with the parameters of `spec` free.
+    pub fn new(records: &'a [Record], spec: LinearEmSpec) -> Self {
+        LinearEm {
+            records,
+            spec,
+            workspace: KalmanWorkspace::new(),
+        }
+    }
+
+    /// The E-step: statistics and log-likelihood at `model`.
+    pub fn e_step(
+        &mut self,
+        model: &LinearGaussianModel,
+    ) -> Result<(SufficientStatistics, f64), LinearEmError> {
+        if self.records.is_empty() {
+            return Err(LinearEmError::NoSteps);
+        }
+        let mut stats = SufficientStatistics::new(model.n(), model.m(), model.p());
+        let mut loglik = 0.0;
+        for (i, record) in self.records.iter().enumerate() {
+            loglik += self
+                .workspace
+                .accumulate_statistics(model, record, i, &mut stats)?;
+        }
+        Ok((stats, loglik))
+    }
+}
+
+impl EmAlgorithm for LinearEm<'_> {
+    type Estimate = LinearGaussianModel;
+    type Error = LinearEmError;
+
+    fn step(
+        &mut self,
+        current: &LinearGaussianModel,
+    ) -> Result<(LinearGaussianModel, f64), LinearEmError> {
+        let (stats, loglik) = self.e_step(current)?;
+        Ok((m_step(current, &stats, &self.spec)?, loglik))
+    }
+
+    fn loglik(&mut self, estimate: &LinearGaussianModel) -> Result<f64, LinearEmError> {
+        let mut total = 0.0;
+        for (i, record) in self.records.iter().enumerate() {
+            record.validate(estimate, i)?;
+            total += self.workspace.loglik(estimate, record)?;
+        }
+        Ok(total)
+    }
+}
+
+/// Fits a linear Gaussian model by EM from `initial`.
+///
+/// `initial` must satisfy `spec` ([`LinearEmSpec::check`]); otherwise the result is
+/// returned at once with [`crate::Termination::Error`] and
+/// [`LinearEmError::InitialNotInSpec`].
+///
+/// # Example
+/// ```
+/// use nalgebra::DMatrix;
+/// use rand::{SeedableRng, rngs::Xoshiro256PlusPlus};
+/// use sysid_em::{EmOptions, linear::{LinearEmSpec, fit}};
+/// use sysid_kalman::LinearGaussianModel;
+/// let truth = LinearGaussianModel::builder(
+///     nalgebra::dmatrix![0.9], nalgebra::dmatrix![1.0], nalgebra::dmatrix![1.0], nalgebra::dmatrix![0.5],
+/// ).build().unwrap();
+/// let data = truth.simulate(&DMatrix::zeros(0, 500), &mut Xoshiro256PlusPlus::seed_from_u64(3)).unwrap();
+/// let start = truth.to_builder().a(nalgebra::dmatrix![0.5]).q(nalgebra::dmatrix![0.3]).build().unwrap();
+/// let spec = LinearEmSpec { c: false, mu: false, p1: false, ..LinearEmSpec::default() };
+/// let result = fit(start, &[data.record], spec, &EmOptions::default(), &mut ());
+/// assert!((result.estimate.a()[(0, 0)] - 0.9).abs() < 0.1);
+/// ```
+pub fn fit(
+    initial: LinearGaussianModel,
+    records: &[Record],
+    spec: LinearEmSpec,
+    options: &EmOptions,
+    observer: &mut impl EmObserver<LinearGaussianModel>,
+) -> EmResult<LinearGaussianModel, LinearEmError> {
+    if let Err(error) = spec.check(&initial) {
+        return crate::EmResult {
+            estimate: initial,
+            loglik: None,
+            trace: Vec::new(),
+            iterations: 0,
+            termination: crate::Termination::Error {
+                iteration: 0,
+                error,
+            },
+            decreases: 0,
+            elapsed: std::time::Duration::ZERO,
+        };
+    }
+    run_em(
+        &mut LinearEm::new(records, spec),
+        initial,
+        options,
+        observer,
+    )
+}

@@ -1,0 +1,224 @@
+//! The closed-form M-step of linear EM (the Cholesky route of Gibson and Ninness).
+
+use super::{Covariance, LinearEmError, LinearEmSpec};
+use nalgebra::{DMatrix, DVector};
+use sysid_kalman::{LinearGaussianModel, SufficientStatistics};
+use sysid_linalg::{QrScratch, psd_factor, solve_upper, triangularize};
+
+/// A regression block: `target = xi_rows - sum_fixed G_j z_j`, regressed on the free
+/// regressors of `z`.
+struct Block<'a> {
+    /// indices (in `c = [x; u; 1; x+; y]`) of the block's left-hand side
+    targets: std::ops::Range<usize>,
+    /// indices of the free regressors
+    free: Vec<usize>,
+    /// fixed regressors: (index range in `c`, coefficient matrix rows x range)
+    fixed: Vec<(std::ops::Range<usize>, &'a DMatrix<f64>)>,
+}
+
+/// Result of a block regression: coefficients of the free regressors
+/// (`rows x free.len()`) and the residual covariance.
+struct Fit {
+    coef: DMatrix<f64>,
+    cov: DMatrix<f64>,
+}
+
+/// Regresses one block by the Cholesky route: with `F'F = H` and `L` the linear map
+/// from `c` to `[free regressors; target]`, the triangular factor `R` of `F L'`
+/// satisfies `R'R = L H L'`; then `Gamma' = R11^{-1} R12` and
+/// `Pi = R22' R22 / N`, a Gram matrix, so PSD by construction, and no inverse formed.
+fn regress(factor: &DMatrix<f64>, block: &Block<'_>, steps: f64) -> Fit {
+    let dim = factor.ncols();
+    let (f, k) = (block.free.len(), block.targets.len());
+    let cols = f + k;
+    let mut l = DMatrix::<f64>::zeros(cols, dim);
+    for (row, &j) in block.free.iter().enumerate() {
+        l[(row, j)] = 1.0;
+    }
+    for (i, target) in block.targets.clone().enumerate() {
+        l[(f + i, target)] = 1.0;
+        for (range, g) in &block.fixed {
+            for (jj, j) in range.clone().enumerate() {
+                l[(f + i, j)] -= g[(i, jj)];
+            }
+        }
+    }
+    let x = factor * l.transpose(); // rows(F) x cols
+    let rows = x.nrows();
+    let ld = rows.max(cols);
+    let mut buf = vec![0.0; ld * cols];
+    for j in 0..cols {
+        buf[j * ld..j * ld + rows].copy_from_slice(x.column(j).as_slice());
+    }
+    triangularize(&mut buf, ld, rows, cols, &mut QrScratch::default());
+    // Gamma' = R11^{-1} R12 (zero pivots: a regressor with no variation gets 0)
+    let mut r12 = DMatrix::<f64>::zeros(f, k);
+    for j in 0..k {
+        for i in 0..f {
+            r12[(i, j)] = buf[(f + j) * ld + i];
+        }
+    }
+    if f > 0 {
+        solve_upper(&buf, ld, f, r12.as_mut_slice(), f, k);
+    }
+    let mut r22 = DMatrix::<f64>::zeros(k, k);
+    for j in 0..k {
+        for i in 0..=j {
+            r22[(i, j)] = buf[(f + j) * ld + f + i];
+        }
+    }
+    let mut cov = r22.transpose() * &r22 / steps;
+    sysid_linalg::symmetrize(&mut cov);
+    Fit {
+        coef: r12.transpose(),
+        cov,
+    }
+}
+
+fn structured(cov: DMatrix<f64>, structure: Covariance, initial: &DMatrix<f64>) -> DMatrix<f64> {
+    match structure {
+        Covariance::Full => cov,
+        Covariance::Diagonal => DMatrix::from_diagonal(&cov.diagonal()),
+        Covariance::Fixed => initial.clone(),
+    }
+}
+
+/// The M-step: the parameters that maximise the expected complete-data log-likelihood
+/// given the smoothed statistics, subject to `spec` (everything not estimated keeps its
+/// value in `model`).
+///
+/// # Algorithm
+/// With `S = 0` the state and output equations decouple, and within each the rows
+/// share their regressors, so the maximiser is one least-squares regression per block
+/// (Gibson and Ninness 2005; Blocker 2008): `x_{t+1}` minus its fixed part on the free
+/// columns of `[x_t; u_t]`, and `y_t` minus its fixed part on the free columns of
+/// `[x_t; u_t; 1]`, each by the Cholesky route ([`regress`]). A diagonal `Q` or `R`
+/// keeps the diagonal of the residual covariance (the rows are then independent
+/// regressions with the same regressors, so the coefficients do not change). The
+/// initial state: `mu = mean E{x_1}`, `P1 = mean E{(x_1 - mu)(x_1 - mu)'}` over records.
+///
+/// # Errors
+/// [`LinearEmError::Unsupported`] when `Q` or `R` is estimated while the model has a
+/// non-zero `S`; [`LinearEmError::NoSteps`] for empty statistics;
+/// [`LinearEmError::Model`] if the new model fails validation (it should not).
+pub fn m_step(
+    model: &LinearGaussianModel,
+    stats: &SufficientStatistics,
+    spec: &LinearEmSpec,
+) -> Result<LinearGaussianModel, LinearEmError> {
+    let (n, m, p) = (model.n(), model.m(), model.p());
+    if model.has_cross_covariance() && (spec.q != Covariance::Fixed || spec.r != Covariance::Fixed)
+    {
+        return Err(LinearEmError::Unsupported(
+            "estimating Q or R of a model with a non-zero cross-covariance S".into(),
+        ));
+    }
+    if stats.steps() == 0 || stats.records() == 0 {
+        return Err(LinearEmError::NoSteps);
+    }
+    let steps = stats.steps() as f64;
+    let (ox, ou, o1, oxn, oy) = (0, n, n + m, n + m + 1, 2 * n + m + 1);
+    let factor = psd_factor("H (smoothed second moments)", stats.second_moment())?;
+    let mut builder = model.to_builder();
+
+    // ---- state block: x_{t+1} on [x_t; u_t] ----
+    let estimate_state = spec.a || spec.b || spec.q != Covariance::Fixed;
+    if estimate_state {
+        let mut free = Vec::new();
+        let mut fixed = Vec::new();
+        if spec.a {
+            free.extend(ox..ox + n)
+        } else {
+            fixed.push((ox..ox + n, model.a()))
+        }
+        if spec.b {
+            free.extend(ou..ou + m)
+        } else {
+            fixed.push((ou..ou + m, model.b()))
+        }
+        let fit = regress(
+            &factor,
+            &Block {
+                targets: oxn..oxn + n,
+                free,
+                fixed,
+            },
+            steps,
+        );
+        let mut col = 0;
+        if spec.a {
+            builder = builder.a(fit.coef.columns(col, n).clone_owned());
+            col += n;
+        }
+        if spec.b {
+            builder = builder.b(fit.coef.columns(col, m).clone_owned());
+        }
+        builder = builder.q(structured(fit.cov, spec.q, model.q()));
+    }
+
+    // ---- output block: y_t on [x_t; u_t; 1] ----
+    let estimate_output = spec.c || spec.d || spec.h || spec.r != Covariance::Fixed;
+    if estimate_output {
+        let h_column = DMatrix::from_column_slice(p, 1, model.h().as_slice());
+        let mut free = Vec::new();
+        let mut fixed = Vec::new();
+        if spec.c {
+            free.extend(ox..ox + n)
+        } else {
+            fixed.push((ox..ox + n, model.c()))
+        }
+        if spec.d {
+            free.extend(ou..ou + m)
+        } else {
+            fixed.push((ou..ou + m, model.d()))
+        }
+        if spec.h {
+            free.push(o1)
+        } else {
+            fixed.push((o1..o1 + 1, &h_column))
+        }
+        let fit = regress(
+            &factor,
+            &Block {
+                targets: oy..oy + p,
+                free,
+                fixed,
+            },
+            steps,
+        );
+        let mut col = 0;
+        if spec.c {
+            builder = builder.c(fit.coef.columns(col, n).clone_owned());
+            col += n;
+        }
+        if spec.d {
+            builder = builder.d(fit.coef.columns(col, m).clone_owned());
+            col += m;
+        }
+        if spec.h {
+            builder = builder.h(fit.coef.column(col).clone_owned());
+        }
+        builder = builder.r(structured(fit.cov, spec.r, model.r()));
+    }
+
+    // ---- initial state ----
+    let records = stats.records() as f64;
+    let s1 = stats.initial_mean_sum();
+    let s2 = stats.initial_second_moment_sum();
+    let mu: DVector<f64> = if spec.mu {
+        s1 / records
+    } else {
+        model.mu().clone()
+    };
+    if spec.mu {
+        builder = builder.mu(mu.clone());
+    }
+    if spec.p1 {
+        // mean E{(x1 - mu)(x1 - mu)'} = (S2 - S1 mu' - mu S1') / K + mu mu'
+        let mut p1 =
+            (s2 - s1 * mu.transpose() - &mu * s1.transpose()) / records + &mu * mu.transpose();
+        sysid_linalg::symmetrize(&mut p1);
+        builder = builder.p1(p1);
+    }
+    Ok(builder.build()?)
+}

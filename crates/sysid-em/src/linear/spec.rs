@@ -1,0 +1,106 @@
+//! What linear EM estimates and what it holds fixed.
+
+use super::LinearEmError;
+use nalgebra::DMatrix;
+use sysid_kalman::LinearGaussianModel;
+
+/// Structure of a free noise covariance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Covariance {
+    /// A full symmetric positive semi-definite matrix.
+    #[default]
+    Full,
+    /// A diagonal matrix (independent noise components).
+    Diagonal,
+    /// Held at its initial value.
+    Fixed,
+}
+
+/// Which parameters of a [`sysid_kalman::LinearGaussianModel`] EM estimates; everything
+/// not estimated is held at its value in the initial model.
+///
+/// The default estimates `A`, `B`, `C`, `D`, `h`, full `Q` and `R`, `mu` and `P1`; the
+/// cross-covariance `S` is always held fixed, at zero (its estimation, and fixed
+/// individual entries of `A`, `B`, `C`, `D`, are not implemented yet).
+///
+/// # Example
+/// ```
+/// use sysid_em::linear::{Covariance, LinearEmSpec};
+/// // D = 0 and h = 0 kept, diagonal R
+/// let spec = LinearEmSpec { d: false, h: false, r: Covariance::Diagonal, ..LinearEmSpec::default() };
+/// assert!(spec.a && !spec.d);
+/// ```
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LinearEmSpec {
+    /// Estimate `A`.
+    pub a: bool,
+    /// Estimate `B`.
+    pub b: bool,
+    /// Estimate `C`.
+    pub c: bool,
+    /// Estimate `D`.
+    pub d: bool,
+    /// Estimate the output offset `h`.
+    pub h: bool,
+    /// Structure of `Q`.
+    pub q: Covariance,
+    /// Structure of `R`.
+    pub r: Covariance,
+    /// Estimate the initial mean `mu`.
+    pub mu: bool,
+    /// Estimate the initial covariance `P1`.
+    pub p1: bool,
+}
+
+impl Default for LinearEmSpec {
+    fn default() -> Self {
+        LinearEmSpec {
+            a: true,
+            b: true,
+            c: true,
+            d: true,
+            h: true,
+            q: Covariance::Full,
+            r: Covariance::Full,
+            mu: true,
+            p1: true,
+        }
+    }
+}
+
+fn is_diagonal(m: &DMatrix<f64>) -> bool {
+    (0..m.ncols()).all(|j| (0..m.nrows()).all(|i| i == j || m[(i, j)] == 0.0))
+}
+
+impl LinearEmSpec {
+    /// Checks that `model` lies in the parameter set this spec describes (a diagonal
+    /// `Q` or `R` where the spec asks for one). EM is monotone only from such a start:
+    /// from outside the set, the first M-step may lower the likelihood.
+    pub fn check(&self, model: &LinearGaussianModel) -> Result<(), LinearEmError> {
+        for (name, structure, matrix) in [("Q", self.q, model.q()), ("R", self.r, model.r())] {
+            if structure == Covariance::Diagonal && !is_diagonal(matrix) {
+                return Err(LinearEmError::InitialNotInSpec {
+                    matrix: name,
+                    reason: "must be diagonal (use LinearEmSpec::project to keep its diagonal)",
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The model moved into this spec's parameter set: a `Q` or `R` to be estimated as
+    /// diagonal keeps only its diagonal.
+    pub fn project(
+        &self,
+        model: &LinearGaussianModel,
+    ) -> Result<LinearGaussianModel, LinearEmError> {
+        let mut builder = model.to_builder();
+        if self.q == Covariance::Diagonal {
+            builder = builder.q(DMatrix::from_diagonal(&model.q().diagonal()));
+        }
+        if self.r == Covariance::Diagonal {
+            builder = builder.r(DMatrix::from_diagonal(&model.r().diagonal()));
+        }
+        Ok(builder.build()?)
+    }
+}

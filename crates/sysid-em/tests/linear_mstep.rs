@@ -1,0 +1,327 @@
+//! The closed-form M-step against a direct numerical maximisation (Nelder-Mead with
+//! restarts, started from the E-step's parameters) of the expected complete-data
+//! log-likelihood, written out independently from the statistics.
+
+use nalgebra::{DMatrix, DVector, dmatrix, dvector};
+use rand::SeedableRng;
+use rand::rngs::Xoshiro256PlusPlus;
+use sysid_em::linear::{Covariance, LinearEm, LinearEmSpec, m_step};
+use sysid_kalman::{LinearGaussianModel, Record, SufficientStatistics};
+
+const LN_2PI: f64 = 1.8378770664093453;
+
+/// E{log p(x, y | theta)} from the statistics (H over c = [x; u; 1; x+; y]).
+fn expected_loglik(model: &LinearGaussianModel, st: &SufficientStatistics) -> f64 {
+    let (n, m, p) = (model.n(), model.m(), model.p());
+    let d = st.dim();
+    let h = st.second_moment();
+    let steps = st.steps() as f64;
+    let (ou, o1, oxn, oy) = (n, n + m, n + m + 1, 2 * n + m + 1);
+    let mut ws = DMatrix::zeros(n, d);
+    ws.view_mut((0, 0), (n, n)).copy_from(&-model.a());
+    ws.view_mut((0, ou), (n, m)).copy_from(&-model.b());
+    ws.view_mut((0, oxn), (n, n)).fill_with_identity();
+    let mut wo = DMatrix::zeros(p, d);
+    wo.view_mut((0, 0), (p, n)).copy_from(&-model.c());
+    wo.view_mut((0, ou), (p, m)).copy_from(&-model.d());
+    wo.view_mut((0, o1), (p, 1)).copy_from(&-model.h());
+    wo.view_mut((0, oy), (p, p)).fill_with_identity();
+    let term = |w: &DMatrix<f64>, cov: &DMatrix<f64>, count: f64| {
+        let k = cov.nrows() as f64;
+        let resid = w * h * w.transpose();
+        -0.5 * (count * (k * LN_2PI + cov.determinant().ln())
+            + (cov.clone().try_inverse().unwrap() * resid).trace())
+    };
+    let records = st.records() as f64;
+    let s1 = st.initial_mean_sum();
+    let mu = model.mu();
+    let init = st.initial_second_moment_sum() - s1 * mu.transpose() - mu * s1.transpose()
+        + mu * mu.transpose() * records;
+    let p1 = model.p1();
+    term(&ws, model.q(), steps) + term(&wo, model.r(), steps)
+        - 0.5
+            * (records * (n as f64 * LN_2PI + p1.determinant().ln())
+                + (p1.clone().try_inverse().unwrap() * init).trace())
+}
+
+/// Free parameters of `spec` <-> a flat vector (covariances by log-Cholesky factors).
+fn pack(model: &LinearGaussianModel, spec: &LinearEmSpec) -> Vec<f64> {
+    let mut v = Vec::new();
+    for (free, mat) in [
+        (spec.a, model.a()),
+        (spec.b, model.b()),
+        (spec.c, model.c()),
+        (spec.d, model.d()),
+    ] {
+        if free {
+            v.extend(mat.iter());
+        }
+    }
+    if spec.h {
+        v.extend(model.h().iter());
+    }
+    for (structure, cov) in [(spec.q, model.q()), (spec.r, model.r())] {
+        pack_cov(&mut v, structure, cov);
+    }
+    if spec.mu {
+        v.extend(model.mu().iter());
+    }
+    if spec.p1 {
+        pack_cov(&mut v, Covariance::Full, model.p1());
+    }
+    v
+}
+
+fn pack_cov(v: &mut Vec<f64>, structure: Covariance, cov: &DMatrix<f64>) {
+    match structure {
+        Covariance::Fixed => {}
+        Covariance::Diagonal => v.extend(cov.diagonal().iter().map(|x| x.ln())),
+        Covariance::Full => {
+            let l = cov.clone().cholesky().unwrap().l();
+            for j in 0..l.ncols() {
+                for i in j..l.nrows() {
+                    v.push(if i == j { l[(i, j)].ln() } else { l[(i, j)] });
+                }
+            }
+        }
+    }
+}
+
+fn unpack(model: &LinearGaussianModel, spec: &LinearEmSpec, v: &[f64]) -> LinearGaussianModel {
+    let mut it = v.iter().copied();
+    let mut take = |r: usize, c: usize| DMatrix::from_iterator(r, c, it.by_ref().take(r * c));
+    let (n, m, p) = (model.n(), model.m(), model.p());
+    let mut b = model.to_builder();
+    if spec.a {
+        b = b.a(take(n, n))
+    }
+    if spec.b {
+        b = b.b(take(n, m))
+    }
+    if spec.c {
+        b = b.c(take(p, n))
+    }
+    if spec.d {
+        b = b.d(take(p, m))
+    }
+    if spec.h {
+        b = b.h(DVector::from_column_slice(take(p, 1).as_slice()))
+    }
+    let cov = |structure: Covariance,
+               k: usize,
+               take: &mut dyn FnMut(usize, usize) -> DMatrix<f64>| match structure {
+        Covariance::Fixed => None,
+        Covariance::Diagonal => Some(DMatrix::from_diagonal(&take(k, 1).column(0).map(f64::exp))),
+        Covariance::Full => {
+            let mut l = DMatrix::zeros(k, k);
+            for j in 0..k {
+                for i in j..k {
+                    let x = take(1, 1)[(0, 0)];
+                    l[(i, j)] = if i == j { x.exp() } else { x };
+                }
+            }
+            Some(&l * l.transpose())
+        }
+    };
+    if let Some(q) = cov(spec.q, n, &mut take) {
+        b = b.q(q)
+    }
+    if let Some(r) = cov(spec.r, p, &mut take) {
+        b = b.r(r)
+    }
+    if spec.mu {
+        b = b.mu(DVector::from_column_slice(take(n, 1).as_slice()))
+    }
+    if spec.p1
+        && let Some(p1) = cov(Covariance::Full, n, &mut take)
+    {
+        b = b.p1(p1)
+    }
+    b.build().unwrap()
+}
+
+/// Nelder-Mead minimisation with restarts until a restart no longer improves.
+fn nelder_mead(f: impl Fn(&[f64]) -> f64, x0: Vec<f64>) -> Vec<f64> {
+    let k = x0.len();
+    let mut best = x0;
+    let mut best_f = f(&best);
+    for _restart in 0..60 {
+        let mut simplex: Vec<(Vec<f64>, f64)> = (0..=k)
+            .map(|i| {
+                let mut x = best.clone();
+                if i > 0 {
+                    x[i - 1] += 0.05 * x[i - 1].abs().max(0.1);
+                }
+                let fx = f(&x);
+                (x, fx)
+            })
+            .collect();
+        for _ in 0..20_000 {
+            simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+            if simplex[k].1 - simplex[0].1 <= 1e-14 * simplex[0].1.abs().max(1.0) {
+                break;
+            }
+            let centroid: Vec<f64> = (0..k)
+                .map(|j| simplex[..k].iter().map(|s| s.0[j]).sum::<f64>() / k as f64)
+                .collect();
+            let point = |t: f64| -> Vec<f64> {
+                (0..k)
+                    .map(|j| centroid[j] + t * (simplex[k].0[j] - centroid[j]))
+                    .collect()
+            };
+            let xr = point(-1.0);
+            let fr = f(&xr);
+            if fr < simplex[0].1 {
+                let xe = point(-2.0);
+                let fe = f(&xe);
+                simplex[k] = if fe < fr { (xe, fe) } else { (xr, fr) };
+            } else if fr < simplex[k - 1].1 {
+                simplex[k] = (xr, fr);
+            } else {
+                let xc = point(0.5);
+                let fc = f(&xc);
+                if fc < simplex[k].1 {
+                    simplex[k] = (xc, fc);
+                } else {
+                    let x0 = simplex[0].0.clone();
+                    for s in simplex.iter_mut().skip(1) {
+                        s.0 = (0..k).map(|j| x0[j] + 0.5 * (s.0[j] - x0[j])).collect();
+                        s.1 = f(&s.0);
+                    }
+                }
+            }
+        }
+        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
+        if simplex[0].1 >= best_f - 1e-13 * best_f.abs() {
+            break;
+        }
+        best = simplex[0].0.clone();
+        best_f = simplex[0].1;
+    }
+    best
+}
+
+fn check(label: &str, model: &LinearGaussianModel, records: &[Record], spec: LinearEmSpec) {
+    let (stats, _) = LinearEm::new(records, spec.clone()).e_step(model).unwrap();
+    let closed = m_step(model, &stats, &spec).unwrap();
+    let objective = |v: &[f64]| -> f64 {
+        let candidate = std::panic::catch_unwind(|| unpack(model, &spec, v));
+        match candidate {
+            Ok(c) => -expected_loglik(&c, &stats),
+            Err(_) => f64::INFINITY,
+        }
+    };
+    let numeric = unpack(model, &spec, &nelder_mead(objective, pack(model, &spec)));
+    let (q_closed, q_numeric) = (
+        expected_loglik(&closed, &stats),
+        expected_loglik(&numeric, &stats),
+    );
+    assert!(
+        q_closed >= q_numeric - 1e-9 * q_closed.abs(),
+        "{label}: closed {q_closed} < numeric {q_numeric}"
+    );
+    let (a, b) = (pack(&closed, &spec), pack(&numeric, &spec));
+    let diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "{label}: Q closed {q_closed:.10}, numeric {q_numeric:.10}, max parameter difference {diff:.1e}"
+    );
+    assert!(
+        diff < 1e-4,
+        "{label}: parameters differ by {diff}: {a:?} vs {b:?}"
+    );
+}
+
+fn data(model: &LinearGaussianModel, steps: usize, seed: u64, gaps: bool) -> Vec<Record> {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let u = DMatrix::from_fn(model.m(), steps, |i, t| ((t * (i + 3)) as f64 * 0.7).sin());
+    let mut rec = model.simulate(&u, &mut rng).unwrap().record;
+    if gaps {
+        for t in (0..steps).step_by(5) {
+            rec.y[(0, t)] = f64::NAN;
+        }
+    }
+    vec![rec]
+}
+
+#[test]
+fn scalar_model_everything_free() {
+    let truth =
+        LinearGaussianModel::builder(dmatrix![0.8], dmatrix![1.2], dmatrix![0.4], dmatrix![0.3])
+            .b(dmatrix![0.5])
+            .d(dmatrix![0.2])
+            .h(dvector![0.7])
+            .mu(dvector![0.3])
+            .p1(dmatrix![0.8])
+            .build()
+            .unwrap();
+    let start = truth
+        .to_builder()
+        .a(dmatrix![0.5])
+        .c(dmatrix![0.9])
+        .q(dmatrix![1.0])
+        .build()
+        .unwrap();
+    check(
+        "scalar, all free",
+        &start,
+        &data(&truth, 80, 1, false),
+        LinearEmSpec::default(),
+    );
+    check(
+        "scalar, all free, gaps",
+        &start,
+        &data(&truth, 80, 2, true),
+        LinearEmSpec::default(),
+    );
+}
+
+#[test]
+fn two_states_with_constraints() {
+    let truth = LinearGaussianModel::builder(
+        dmatrix![0.7, 0.2; -0.1, 0.5],
+        dmatrix![1.0, 0.0; 0.5, 1.0],
+        dmatrix![0.3, 0.0; 0.0, 0.2],
+        dmatrix![0.2, 0.05; 0.05, 0.1],
+    )
+    .b(dmatrix![1.0; 0.5])
+    .h(dvector![0.3, -0.1])
+    .build()
+    .unwrap();
+    let start = truth
+        .to_builder()
+        .a(dmatrix![0.5, 0.0; 0.0, 0.5])
+        .q(dmatrix![0.6, 0.0; 0.0, 0.6])
+        .build()
+        .unwrap();
+    let spec = LinearEmSpec {
+        b: false,
+        d: false,
+        q: Covariance::Diagonal,
+        mu: false,
+        p1: false,
+        ..LinearEmSpec::default()
+    };
+    check(
+        "two states, B and D fixed, diagonal Q",
+        &start,
+        &data(&truth, 60, 3, true),
+        spec,
+    );
+    let spec = LinearEmSpec {
+        a: false,
+        c: false,
+        r: Covariance::Diagonal,
+        ..LinearEmSpec::default()
+    };
+    let start = spec.project(&start).unwrap();
+    check(
+        "two states, A and C fixed, diagonal R",
+        &start,
+        &data(&truth, 60, 4, false),
+        spec,
+    );
+}

@@ -98,10 +98,10 @@ fn two_state_model_with_inputs_offset_and_partial_missing() {
         (32, [-0.33069572669016223, -0.26617815334573985]),
         (39, [0.6569894466582746, 0.10401252161406177]),
     ] {
-        for i in 0..2 {
+        for (i, &want) in x.iter().enumerate() {
             close(
                 sm.mean(k)[i],
-                x[i],
+                want,
                 &format!("smoothed x{} at t = {}", i + 1, k + 1),
             );
         }

@@ -6,6 +6,8 @@
 //! * [`kalman`]: linear Gaussian state-space models: simulation, square-root Kalman
 //!   filter, RTS smoother with lag-one covariances, exact log-likelihood with missing
 //!   data, EM sufficient statistics;
+//! * [`subspace`]: N4SID subspace identification (the start of EM);
+//! * [`em`]: the EM runner and exact EM for linear Gaussian models;
 //! * [`models`]: the canonical systems of the source papers.
 //!
 //! # Example
@@ -18,9 +20,11 @@
 //! assert!(loglik.is_finite());
 //! ```
 
+pub use sysid_em as em;
 pub use sysid_kalman as kalman;
 pub use sysid_linalg as linalg;
 pub use sysid_models as models;
+pub use sysid_subspace as subspace;
 
 /// The names most programs need.
 pub mod prelude {

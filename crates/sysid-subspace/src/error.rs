@@ -1,0 +1,41 @@
+use sysid_kalman::KalmanError;
+use thiserror::Error;
+
+/// Errors of subspace identification; each names what is wrong and where.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum SubspaceError {
+    /// The requested order exceeds what the block Hankel matrices can reveal.
+    #[error(
+        "order {order} is larger than the data allow with {block_rows} block rows (at most {max})"
+    )]
+    OrderTooLarge {
+        order: usize,
+        block_rows: usize,
+        max: usize,
+    },
+    /// Not enough samples for the number of block rows.
+    #[error("{block_rows} block rows need at least {needed} samples, the data have {got}")]
+    TooFewSamples {
+        block_rows: usize,
+        needed: usize,
+        got: usize,
+    },
+    /// Fewer than two block rows, or zero order.
+    #[error("invalid option: {0}")]
+    InvalidOption(String),
+    /// N4SID needs complete data.
+    #[error(
+        "output {output} is missing at time {time}: N4SID needs complete data (fill or cut the gaps, or start EM from another model)"
+    )]
+    MissingData { time: usize, output: usize },
+    /// The data have no outputs.
+    #[error("the data have no output")]
+    NoOutputs,
+    /// Inputs and outputs disagree in length, or a value is not finite.
+    #[error("invalid data: {0}")]
+    Data(#[from] KalmanError),
+    /// A factorization failed (should not happen on finite data).
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+}

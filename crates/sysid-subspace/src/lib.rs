@@ -1,0 +1,23 @@
+//! Subspace identification (N4SID) of linear Gaussian state-space models: the
+//! initialisation of EM.
+//!
+//! ```
+//! use sysid_subspace::{n4sid, N4sidOptions, Order};
+//! # use nalgebra::{dmatrix, DMatrix};
+//! # use rand::{SeedableRng, rngs::Xoshiro256PlusPlus};
+//! # use rand_distr::{Distribution, StandardNormal};
+//! # let truth = sysid_kalman::LinearGaussianModel::builder(dmatrix![0.8], dmatrix![1.0], dmatrix![0.1], dmatrix![0.1])
+//! #     .b(dmatrix![1.0]).build().unwrap();
+//! # let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+//! # let u = DMatrix::from_fn(1, 2000, |_, _| StandardNormal.sample(&mut rng));
+//! # let record = truth.simulate(&u, &mut rng).unwrap().record;
+//! let fit = n4sid(&record, &N4sidOptions { order: Order::Fixed(1), ..Default::default() }).unwrap();
+//! assert!((fit.model.a()[(0, 0)] - 0.8).abs() < 0.05);
+//! assert!(fit.singular_values[0] > 10.0 * fit.singular_values[1]);
+//! ```
+
+mod error;
+mod n4sid;
+
+pub use error::SubspaceError;
+pub use n4sid::{N4sidOptions, N4sidResult, Order, auto_order, n4sid};

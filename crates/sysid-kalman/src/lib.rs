@@ -36,6 +36,7 @@ mod data;
 mod dense;
 mod error;
 mod filter;
+mod frequency;
 mod model;
 mod scalar;
 mod simulate;

@@ -159,14 +159,8 @@ mod tests {
     use super::*;
     use nalgebra::Complex;
 
-    /// Frequency response of a model's `C (zI - A)^{-1} B + D` at `z`.
     fn response(model: &LinearGaussianModel, z: Complex<f64>) -> nalgebra::DMatrix<Complex<f64>> {
-        let n = model.n();
-        let a = model.a().map(|v| Complex::new(v, 0.0));
-        let zi_a = nalgebra::DMatrix::<Complex<f64>>::identity(n, n) * z - a;
-        let b = model.b().map(|v| Complex::new(v, 0.0));
-        let c = model.c().map(|v| Complex::new(v, 0.0));
-        c * zi_a.lu().solve(&b).unwrap() + model.d().map(|v| Complex::new(v, 0.0))
+        model.frequency_response(z.arg()).unwrap()
     }
 
     #[test]

@@ -62,6 +62,15 @@ pub enum CliError {
     },
     #[error("unknown system {name:?} (known: {known})")]
     UnknownSystem { name: String, known: String },
+    #[error("{option}: {message}")]
+    BadOption {
+        option: &'static str,
+        message: String,
+    },
+    #[error("{0}")]
+    Subspace(#[from] sysid::subspace::SubspaceError),
+    #[error("{0}")]
+    Em(#[from] sysid::em::linear::LinearEmError),
     #[error("the data have {found} {what} columns but the model has {expected}")]
     ColumnCount {
         what: &'static str,

@@ -45,6 +45,10 @@ pub struct DataArgs {
 enum Command {
     /// Simulate a canonical system and write its data as CSV (t, u1.., y1.., [x1..]).
     Simulate(commands::simulate::Options),
+    /// Identify a linear state-space model by N4SID and write it as JSON.
+    N4sid(commands::n4sid::Options),
+    /// Fit a model to data by maximum likelihood (`fit lti`: exact EM).
+    Fit(commands::fit::Options),
     /// Print the exact log-likelihood of data under a model (square-root Kalman filter).
     Loglik {
         /// Model file (JSON, see docs/model-format.md).
@@ -89,6 +93,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(options) => commands::simulate::run(&options),
+        Command::N4sid(options) => commands::n4sid::run(&options),
+        Command::Fit(options) => commands::fit::run(&options),
         Command::Loglik { model, data, json } => commands::loglik::run(&model, &data, json),
         Command::Smooth {
             model,

@@ -1,6 +1,9 @@
 //! One module per subcommand.
 
+pub mod fit;
+pub mod fix;
 pub mod loglik;
+pub mod n4sid;
 pub mod simulate;
 pub mod smooth;
 

@@ -51,6 +51,9 @@ pub enum LinearEmError {
     /// A combination of fixed and free parameters that this M-step does not handle.
     #[error("unsupported: {0}")]
     Unsupported(String),
+    /// No output is observed anywhere in the data set: nothing to fit.
+    #[error("every output of every record is missing: nothing to fit")]
+    NoObservations,
     /// The starting model is outside the parameter set of the spec.
     #[error("initial model: {matrix} {reason}")]
     InitialNotInSpec {
@@ -145,7 +148,13 @@ pub fn fit(
     options: &EmOptions,
     observer: &mut impl EmObserver<LinearGaussianModel>,
 ) -> EmResult<LinearGaussianModel, LinearEmError> {
-    if let Err(error) = spec.check(&initial) {
+    let observed = records.iter().any(|r| r.y.iter().any(|v| !v.is_nan()));
+    let check = if observed {
+        spec.check(&initial)
+    } else {
+        Err(LinearEmError::NoObservations)
+    };
+    if let Err(error) = check {
         return crate::EmResult {
             estimate: initial,
             loglik: None,

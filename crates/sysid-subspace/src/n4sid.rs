@@ -20,8 +20,9 @@ pub enum Order {
 pub struct N4sidOptions {
     /// Model order (default: [`Order::Auto`]).
     pub order: Order,
-    /// Number of block rows `i` of the Hankel matrices (default: `max(10, ceil((n + 1) / p) + 1)`
-    /// for a fixed order `n`, and 10 for [`Order::Auto`]). Must satisfy `p i > n`.
+    /// Number of block rows `i` of the Hankel matrices. Default: `max(10, ceil((n + 1) / p) + 1)`
+    /// for a fixed order `n`, and 10 for [`Order::Auto`], reduced to the largest number
+    /// the data allow, `floor((T + 1) / (2 (m + p) + 2))`. Must satisfy `p i > n`.
     pub block_rows: Option<usize>,
 }
 
@@ -163,10 +164,14 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
             }
         }
     }
+    // Block rows: the user's choice, or a default that is shrunk to what the data
+    // allow (T >= 2 (m + p) i + 2 i - 1 samples are needed for the factorization).
+    let feasible = |i: usize| 2 * (m + p) * i + 2 * i - 1 <= t_len;
+    let i_max = (t_len + 1) / (2 * (m + p) + 2);
     let i = match (options.block_rows, options.order) {
         (Some(i), _) => i,
-        (None, Order::Fixed(n)) => 10.max((n + 1).div_ceil(p) + 1),
-        (None, Order::Auto) => 10,
+        (None, Order::Fixed(n)) => 10.max((n + 1).div_ceil(p) + 1).min(i_max.max(2)),
+        (None, Order::Auto) => 10.min(i_max.max(2)),
     };
     if i < 2 {
         return Err(SubspaceError::InvalidOption(format!(
@@ -180,16 +185,22 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
             ));
         }
         if n >= p * i {
+            // with default block rows, report what the data allow at most
+            let max = if options.block_rows.is_none() {
+                (p * i_max).saturating_sub(1)
+            } else {
+                p * i - 1
+            };
             return Err(SubspaceError::OrderTooLarge {
                 order: n,
                 block_rows: i,
-                max: p * i - 1,
+                max,
             });
         }
     }
     let r_h = 2 * (m + p) * i;
     let needed = r_h + 2 * i - 1;
-    if t_len < needed {
+    if !feasible(i) {
         return Err(SubspaceError::TooFewSamples {
             block_rows: i,
             needed,

@@ -1,0 +1,298 @@
+//! `sysid n4sid` and `sysid fit lti` end to end: a constrained fit against the exact
+//! maximum-likelihood estimate, and bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use sysid::kalman::{KalmanWorkspace, LinearGaussianModel, ModelSpec, Record};
+
+fn scratch_dir() -> PathBuf {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "sysid-fit-test-{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::SeqCst)
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn sysid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn assert_one_line_error(out: &Output, needles: &[&str]) {
+    assert!(
+        !out.status.success(),
+        "expected failure, stdout {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "stderr should be one line: {err}");
+    for n in needles {
+        assert!(err.contains(n), "stderr {err:?} should contain {n:?}");
+    }
+}
+
+fn local_level(q: f64, r: f64) -> LinearGaussianModel {
+    use nalgebra::dmatrix;
+    LinearGaussianModel::builder(dmatrix![1.0], dmatrix![1.0], dmatrix![q], dmatrix![r])
+        .p1(dmatrix![10.0])
+        .build()
+        .unwrap()
+}
+
+/// The exact ML estimate of (Q, R) by a 2-D search on the exact log-likelihood: a
+/// log-spaced grid, then coordinate-wise golden-section refinement until it settles.
+fn exact_ml(record: &Record) -> (f64, f64) {
+    let mut ws = KalmanWorkspace::new();
+    let mut ll = |lq: f64, lr: f64| ws.loglik(&local_level(lq.exp(), lr.exp()), record).unwrap();
+    let grid: Vec<f64> = (0..=60).map(|k| -6.0 + 8.0 * k as f64 / 60.0).collect();
+    let (mut lq, mut lr, mut best) = (0.0, 0.0, f64::NEG_INFINITY);
+    for &a in &grid {
+        for &b in &grid {
+            let v = ll(a, b);
+            if v > best {
+                (lq, lr, best) = (a, b, v);
+            }
+        }
+    }
+    let golden = |f: &mut dyn FnMut(f64) -> f64, lo: f64, hi: f64| {
+        let g = (5f64.sqrt() - 1.0) / 2.0;
+        let (mut a, mut b) = (lo, hi);
+        while b - a > 1e-10 {
+            let (c, d) = (b - g * (b - a), a + g * (b - a));
+            if f(c) > f(d) { b = d } else { a = c }
+        }
+        0.5 * (a + b)
+    };
+    for _ in 0..60 {
+        let (old_q, old_r) = (lq, lr);
+        lq = golden(&mut |x| ll(x, lr), lq - 0.3, lq + 0.3);
+        lr = golden(&mut |x| ll(lq, x), lr - 0.3, lr + 0.3);
+        if (lq - old_q).abs() < 1e-9 && (lr - old_r).abs() < 1e-9 {
+            break;
+        }
+    }
+    (lq.exp(), lr.exp())
+}
+
+#[test]
+fn constrained_local_level_fit_matches_the_exact_ml_estimate() {
+    use rand::SeedableRng;
+    let truth = local_level(0.1, 1.0);
+    let sim = truth
+        .simulate(
+            &nalgebra::DMatrix::zeros(0, 500),
+            &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(9),
+        )
+        .unwrap();
+    let dir = scratch_dir();
+    let (data, init, out) = (
+        dir.join("d.csv"),
+        dir.join("init.json"),
+        dir.join("fit.json"),
+    );
+    let mut csv = String::from("t,y1\n");
+    for t in 0..500 {
+        csv += &format!("{},{}\n", t + 1, sim.record.y[(0, t)]);
+    }
+    std::fs::write(&data, csv).unwrap();
+    let start = ModelSpec::from_model(&local_level(0.5, 0.5));
+    std::fs::write(&init, serde_json::to_string(&start).unwrap()).unwrap();
+    let result = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--init",
+        s(&init),
+        "--fix",
+        "A",
+        "--fix",
+        "C",
+        "--fix",
+        "mu",
+        "--fix",
+        "P1",
+        "--fix",
+        "h",
+        "--max-iter",
+        "20000",
+        "--tol",
+        "1e-13",
+        "--out",
+        s(&out),
+        "--json",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let fitted: ModelSpec = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let (q, r) = (fitted.q[0][0], fitted.r[0][0]);
+    let (q_ml, r_ml) = exact_ml(&sim.record);
+    eprintln!(
+        "EM: Q {q} R {r}; exact ML: Q {q_ml} R {r_ml}; {}",
+        String::from_utf8_lossy(&result.stdout)
+    );
+    assert!((q - q_ml).abs() <= 1e-3 * q_ml, "Q {q} vs {q_ml}");
+    assert!((r - r_ml).abs() <= 1e-3 * r_ml, "R {r} vs {r_ml}");
+    assert_eq!(fitted.a, vec![vec![1.0]]);
+    assert_eq!(fitted.p1, Some(vec![vec![10.0]]));
+}
+
+fn lti2x2_csv(dir: &Path, steps: &str) -> PathBuf {
+    let data = dir.join("d.csv");
+    let out = sysid(&["simulate", "lti2x2", "--steps", steps, "--out", s(&data)]);
+    assert!(out.status.success());
+    data
+}
+
+#[test]
+fn n4sid_reports_orders_and_sample_sizes() {
+    let dir = scratch_dir();
+    let data = lti2x2_csv(&dir, "300");
+    // 300 samples of 2 inputs and 2 outputs allow at most 30 block rows: order <= 59
+    let out = sysid(&[
+        "n4sid",
+        "--data",
+        s(&data),
+        "--order",
+        "80",
+        "--out",
+        s(&dir.join("m.json")),
+    ]);
+    assert_one_line_error(
+        &out,
+        &["order 80", "larger than the data allow", "at most 59"],
+    );
+    let out = sysid(&[
+        "n4sid",
+        "--data",
+        s(&data),
+        "--order",
+        "4",
+        "--block-rows",
+        "40",
+        "--out",
+        s(&dir.join("m.json")),
+    ]);
+    assert_one_line_error(&out, &["40 block rows", "need at least", "have 300"]);
+    let out = sysid(&[
+        "n4sid",
+        "--data",
+        s(&data),
+        "--order",
+        "8",
+        "--out",
+        s(&dir.join("m.json")),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["order"], 8);
+    assert_eq!(v["singular_values"].as_array().unwrap().len(), 20);
+}
+
+#[test]
+fn fit_rejects_bad_fixes_and_empty_data() {
+    let dir = scratch_dir();
+    let data = lti2x2_csv(&dir, "300");
+    let out_json = dir.join("m.json");
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--order",
+        "4",
+        "--fix",
+        "Z=1",
+        "--out",
+        s(&out_json),
+    ]);
+    assert_one_line_error(&out, &["--fix", "unknown matrix \"Z\""]);
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--order",
+        "4",
+        "--fix",
+        "A=[[1, 0], [0, 1]]",
+        "--out",
+        s(&out_json),
+    ]);
+    assert_one_line_error(&out, &["--fix", "A: expected a 4x4 value, got 2x2"]);
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--fix",
+        "A",
+        "--out",
+        s(&out_json),
+    ]);
+    assert_one_line_error(&out, &["--order"]);
+    // every output missing: n4sid start is impossible, and so is EM from a file
+    let empty = dir.join("empty.csv");
+    let mut csv = String::from("t,u1,u2,y1,y2\n");
+    for t in 1..=300 {
+        csv += &format!("{t},0.5,-0.5,,\n");
+    }
+    std::fs::write(&empty, csv).unwrap();
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&empty),
+        "--order",
+        "2",
+        "--out",
+        s(&out_json),
+    ]);
+    assert_one_line_error(&out, &["missing at time 1"]);
+    let model = dir.join("true.json");
+    assert!(
+        sysid(&[
+            "simulate",
+            "lti2x2",
+            "--steps",
+            "5",
+            "--out",
+            s(&dir.join("x.csv")),
+            "--model-out",
+            s(&model)
+        ])
+        .status
+        .success()
+    );
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&empty),
+        "--init",
+        s(&model),
+        "--out",
+        s(&out_json),
+    ]);
+    assert_one_line_error(&out, &["every output", "missing"]);
+    assert!(!out_json.exists(), "nothing is written on failure");
+}

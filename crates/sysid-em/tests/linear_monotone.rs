@@ -1,11 +1,12 @@
 //! Exact EM never decreases the likelihood: 200 seeded random systems mixing fixed
-//! matrices, diagonal Q/R, inputs, offsets and missing data, 25 iterations each.
+//! matrices, fixed individual entries, a free S, diagonal Q/R, inputs, offsets and
+//! missing data, 25 iterations each.
 
 use nalgebra::{DMatrix, DVector};
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
-use sysid_em::linear::{Covariance, LinearEmSpec, fit};
+use sysid_em::linear::{Covariance, FixedEntries, LinearEmSpec, fit};
 use sysid_em::{EmOptions, Termination};
 use sysid_kalman::{LinearGaussianModel, Record};
 
@@ -62,14 +63,35 @@ fn case(seed: u64) -> (LinearGaussianModel, Vec<Record>, LinearEmSpec) {
             rec
         })
         .collect();
+    let mut mask = |r: usize, c: usize| {
+        rng.random_bool(0.3)
+            .then(|| DMatrix::from_fn(r, c, |_, _| rng.random_bool(0.3)))
+    };
+    let fixed_entries = FixedEntries {
+        a: mask(n, n),
+        b: mask(n, m),
+        c: mask(p, n),
+        d: mask(p, m),
+    };
+    let s_free = rng.random_bool(0.2);
     let spec = LinearEmSpec {
+        s: s_free,
+        fixed_entries,
         a: rng.random_bool(0.7),
         b: rng.random_bool(0.7),
         c: rng.random_bool(0.7),
         d: rng.random_bool(0.5),
         h: rng.random_bool(0.5),
-        q: covariance(&mut rng),
-        r: covariance(&mut rng),
+        q: if s_free {
+            Covariance::Full
+        } else {
+            covariance(&mut rng)
+        },
+        r: if s_free {
+            Covariance::Full
+        } else {
+            covariance(&mut rng)
+        },
         mu: rng.random_bool(0.5),
         p1: rng.random_bool(0.5),
     };
@@ -96,8 +118,10 @@ fn exact_em_never_decreases_the_likelihood() {
     .unwrap();
     let mut worst = 0.0_f64;
     let mut gains = Vec::new();
+    let mut ecm_runs = 0;
     for seed in 0..200 {
         let (start, records, spec) = case(seed);
+        ecm_runs += spec.needs_ecm() as usize;
         let result = fit(start, &records, spec.clone(), &options, &mut ());
         assert_eq!(
             result.termination,
@@ -117,7 +141,10 @@ fn exact_em_never_decreases_the_likelihood() {
         moved > 150,
         "only {moved} of 200 runs improved the log-likelihood by more than 1"
     );
-    eprintln!("largest relative decrease {worst:e}; runs improving by > 1: {moved}/200");
+    eprintln!(
+        "largest relative decrease {worst:e}; runs improving by > 1: {moved}/200; ECM runs {ecm_runs}"
+    );
+    assert!(ecm_runs > 50, "the mix must exercise the conditional route");
 }
 
 #[test]

@@ -325,3 +325,123 @@ fn two_states_with_constraints() {
         spec,
     );
 }
+
+/// E{log p} with the joint noise covariance (S included), up to the initial-state term.
+fn expected_loglik_joint(
+    gamma: &DMatrix<f64>,
+    pi: &DMatrix<f64>,
+    st: &SufficientStatistics,
+) -> f64 {
+    let (q, k) = gamma.shape();
+    let mut w = DMatrix::zeros(q, k + q);
+    w.view_mut((0, 0), (q, k)).copy_from(&-gamma);
+    w.view_mut((0, k), (q, q)).fill_with_identity();
+    let resid = &w * st.second_moment() * w.transpose();
+    let n = st.steps() as f64;
+    -0.5 * (n * (q as f64 * LN_2PI + pi.determinant().ln())
+        + (pi.clone().try_inverse().unwrap() * resid).trace())
+}
+
+fn gamma_pi(model: &LinearGaussianModel) -> (DMatrix<f64>, DMatrix<f64>) {
+    let (n, m, p) = (model.n(), model.m(), model.p());
+    let mut g = DMatrix::zeros(n + p, n + m + 1);
+    g.view_mut((0, 0), (n, n)).copy_from(model.a());
+    g.view_mut((0, n), (n, m)).copy_from(model.b());
+    g.view_mut((n, 0), (p, n)).copy_from(model.c());
+    g.view_mut((n, n), (p, m)).copy_from(model.d());
+    g.view_mut((n, n + m), (p, 1)).copy_from(model.h());
+    let mut pi = DMatrix::zeros(n + p, n + p);
+    pi.view_mut((0, 0), (n, n)).copy_from(model.q());
+    pi.view_mut((0, n), (n, p)).copy_from(model.s());
+    pi.view_mut((n, 0), (p, n))
+        .copy_from(&model.s().transpose());
+    pi.view_mut((n, n), (p, p)).copy_from(model.r());
+    (g, pi)
+}
+
+/// ECM (fixed entries of C, free S): the coefficient step equals the numerical maximum
+/// over the free entries of Gamma at the old Pi, and the covariance step the numerical
+/// maximum over the joint Pi at the new Gamma.
+#[test]
+fn ecm_steps_equal_conditional_maximisations() {
+    use sysid_em::linear::FixedEntries;
+    let truth = LinearGaussianModel::builder(
+        dmatrix![0.8],
+        dmatrix![1.0; 0.5],
+        dmatrix![0.3],
+        dmatrix![0.2, 0.05; 0.05, 0.1],
+    )
+    .b(dmatrix![1.0])
+    .d(dmatrix![0.2; -0.3])
+    .h(dvector![0.3, -0.1])
+    .s(dmatrix![0.1, 0.05])
+    .build()
+    .unwrap();
+    let start = truth
+        .to_builder()
+        .a(dmatrix![0.5])
+        .c(dmatrix![1.0; 0.9])
+        .s(dmatrix![0.0, 0.0])
+        .build()
+        .unwrap();
+    let records = data(&truth, 80, 5, true);
+    let spec = LinearEmSpec {
+        s: true,
+        mu: false,
+        p1: false,
+        fixed_entries: FixedEntries {
+            c: Some(DMatrix::from_row_slice(2, 1, &[true, false])),
+            ..FixedEntries::default()
+        },
+        ..LinearEmSpec::default()
+    };
+    let (stats, _) = LinearEm::new(&records, spec.clone())
+        .e_step(&start)
+        .unwrap();
+    let new = m_step(&start, &stats, &spec).unwrap();
+    assert_eq!(new.c()[(0, 0)], 1.0, "the fixed entry stays");
+    let (g_old, pi_old) = gamma_pi(&start);
+    let (g_new, pi_new) = gamma_pi(&new);
+    // free entries: all of column 0..3 except C[0,0] (row 1, col 0) and the state offset (row 0, col 2)
+    let free: Vec<(usize, usize)> = (0..3)
+        .flat_map(|j| (0..3).map(move |i| (i, j)))
+        .filter(|&(i, j)| !((i == 1 && j == 0) || (i == 0 && j == 2)))
+        .collect();
+    let set = |v: &[f64]| {
+        let mut g = g_old.clone();
+        for (a, &(i, j)) in free.iter().enumerate() {
+            g[(i, j)] = v[a];
+        }
+        g
+    };
+    let x0: Vec<f64> = free.iter().map(|&(i, j)| g_old[(i, j)]).collect();
+    let best = nelder_mead(|v| -expected_loglik_joint(&set(v), &pi_old, &stats), x0);
+    let g_numeric = set(&best);
+    let diff = (&g_numeric - &g_new).amax();
+    eprintln!("ECM coefficient step vs numerical: max difference {diff:.1e}");
+    assert!(diff < 1e-5, "{g_new} vs {g_numeric}");
+    // covariance step: log-Cholesky parameters of the 3x3 joint Pi
+    let unpack_pi = |v: &[f64]| {
+        let mut l = DMatrix::zeros(3, 3);
+        let mut it = v.iter();
+        for j in 0..3 {
+            for i in j..3 {
+                let x = *it.next().unwrap();
+                l[(i, j)] = if i == j { x.exp() } else { x };
+            }
+        }
+        &l * l.transpose()
+    };
+    let l0 = pi_old.clone().cholesky().unwrap().l();
+    let x0: Vec<f64> = (0..3)
+        .flat_map(|j| (j..3).map(move |i| (i, j)))
+        .map(|(i, j)| if i == j { l0[(i, j)].ln() } else { l0[(i, j)] })
+        .collect();
+    let best = nelder_mead(
+        |v| -expected_loglik_joint(&g_new, &unpack_pi(v), &stats),
+        x0,
+    );
+    let diff = (unpack_pi(&best) - &pi_new).amax();
+    eprintln!("ECM covariance step vs numerical: max difference {diff:.1e}");
+    assert!(diff < 1e-5, "{pi_new} vs {}", unpack_pi(&best));
+}

@@ -24,11 +24,12 @@
 //! Shumway and Stoffer, J. Time Series Analysis 3 (1982); Gibson and Ninness,
 //! Automatica 41 (2005); Blocker (2008).
 
+mod ecm;
 mod mstep;
 mod spec;
 
 pub use mstep::m_step;
-pub use spec::{Covariance, LinearEmSpec};
+pub use spec::{Covariance, FixedEntries, LinearEmSpec};
 
 use crate::{EmAlgorithm, EmObserver, EmOptions, EmResult, run_em};
 use sysid_kalman::{
@@ -51,6 +52,10 @@ pub enum LinearEmError {
     /// A combination of fixed and free parameters that this M-step does not handle.
     #[error("unsupported: {0}")]
     Unsupported(String),
+    /// The spec is inconsistent (a mask of the wrong shape, `S` free with structured
+    /// `Q` or `R`).
+    #[error("invalid specification: {0}")]
+    InvalidSpec(String),
     /// No output is observed anywhere in the data set: nothing to fit.
     #[error("every output of every record is missing: nothing to fit")]
     NoObservations,

@@ -75,7 +75,11 @@ fn regress(factor: &DMatrix<f64>, block: &Block<'_>, steps: f64) -> Fit {
     }
 }
 
-fn structured(cov: DMatrix<f64>, structure: Covariance, initial: &DMatrix<f64>) -> DMatrix<f64> {
+pub(super) fn structured(
+    cov: DMatrix<f64>,
+    structure: Covariance,
+    initial: &DMatrix<f64>,
+) -> DMatrix<f64> {
     match structure {
         Covariance::Full => cov,
         Covariance::Diagonal => DMatrix::from_diagonal(&cov.diagonal()),
@@ -97,15 +101,26 @@ fn structured(cov: DMatrix<f64>, structure: Covariance, initial: &DMatrix<f64>) 
 /// regressions with the same regressors, so the coefficients do not change). The
 /// initial state: `mu = mean E{x_1}`, `P1 = mean E{(x_1 - mu)(x_1 - mu)'}` over records.
 ///
+/// Fixed individual entries or a free `S` switch to the conditional route
+/// (`ecm`): a generalised least-squares step for the free entries of
+/// `[[A, B, 0], [C, D, h]]` given the current noise covariance, then the noise
+/// covariance given the new coefficients; each is an exact conditional maximum, so the
+/// likelihood still cannot decrease.
+///
 /// # Errors
 /// [`LinearEmError::Unsupported`] when `Q` or `R` is estimated while the model has a
-/// non-zero `S`; [`LinearEmError::NoSteps`] for empty statistics;
+/// non-zero fixed `S`, or when the conditional route meets a singular noise covariance;
+/// [`LinearEmError::InvalidSpec`]; [`LinearEmError::NoSteps`] for empty statistics;
 /// [`LinearEmError::Model`] if the new model fails validation (it should not).
 pub fn m_step(
     model: &LinearGaussianModel,
     stats: &SufficientStatistics,
     spec: &LinearEmSpec,
 ) -> Result<LinearGaussianModel, LinearEmError> {
+    spec.check(model)?;
+    if spec.needs_ecm() {
+        return super::ecm::m_step_ecm(model, stats, spec);
+    }
     let (n, m, p) = (model.n(), model.m(), model.p());
     if model.has_cross_covariance() && (spec.q != Covariance::Fixed || spec.r != Covariance::Fixed)
     {
@@ -201,7 +216,18 @@ pub fn m_step(
         builder = builder.r(structured(fit.cov, spec.r, model.r()));
     }
 
-    // ---- initial state ----
+    builder = initial_state(builder, model, stats, spec);
+    Ok(builder.build()?)
+}
+
+/// The initial-state update: `mu = mean E{x_1}` and
+/// `P1 = mean E{(x_1 - mu)(x_1 - mu)'}` over records, where the spec frees them.
+pub(super) fn initial_state(
+    mut builder: sysid_kalman::ModelBuilder,
+    model: &LinearGaussianModel,
+    stats: &SufficientStatistics,
+    spec: &LinearEmSpec,
+) -> sysid_kalman::ModelBuilder {
     let records = stats.records() as f64;
     let s1 = stats.initial_mean_sum();
     let s2 = stats.initial_second_moment_sum();
@@ -220,5 +246,5 @@ pub fn m_step(
         sysid_linalg::symmetrize(&mut p1);
         builder = builder.p1(p1);
     }
-    Ok(builder.build()?)
+    builder
 }

@@ -6,6 +6,7 @@
 //! cargo run --release -p sysid-bench -- kalman [--reps 21]
 //! ```
 
+mod em;
 mod kalman;
 mod lti2x2;
 
@@ -35,6 +36,12 @@ enum Runner {
         #[arg(long)]
         system: Option<String>,
     },
+    /// One linear EM iteration and N4SID on lti2x2 (ms).
+    Em {
+        /// Repetitions; medians are reported.
+        #[arg(long, default_value_t = 21)]
+        reps: usize,
+    },
     /// Seed-004 reproduction: EM from the paper's initial model and from N4SID on
     /// lti2x2 data sets.
     Lti2x2 {
@@ -60,6 +67,7 @@ fn main() {
     let cli = Cli::parse();
     match cli.runner {
         Runner::Kalman { reps, system } => kalman::run(reps.max(1), system.as_deref()),
+        Runner::Em { reps } => em::run(reps.max(1)),
         Runner::Lti2x2 {
             datasets,
             steps,

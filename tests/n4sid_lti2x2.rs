@@ -162,3 +162,26 @@ fn bad_input_is_reported() {
         }
     );
 }
+
+/// The purely stochastic case (no inputs): lgss, x' = 0.9 x + w, y = x + e.
+#[test]
+fn purely_stochastic_case_recovers_the_pole() {
+    let sim = sysid::models::System::Lgss.simulate(5000, 11).unwrap();
+    let result = n4sid(&sim.record, &N4sidOptions::default()).unwrap();
+    assert_eq!(
+        result.order,
+        1,
+        "singular values {:?}",
+        &result.singular_values[..4]
+    );
+    let a = result.model.a()[(0, 0)];
+    eprintln!("stochastic N4SID: a = {a}, h = {}", result.model.h()[0]);
+    assert!((a - 0.9).abs() < 0.03, "a = {a}");
+    // the innovation variance implied by the model matches the data's one-step errors:
+    // the model's log-likelihood is within a few nats per thousand steps of the truth's
+    let mut ws = sysid::kalman::KalmanWorkspace::new();
+    let ll_fit = ws.loglik(&result.model, &sim.record).unwrap();
+    let ll_true = ws.loglik(&sysid::models::lgss(), &sim.record).unwrap();
+    eprintln!("loglik: n4sid model {ll_fit}, truth {ll_true}");
+    assert!(ll_fit > ll_true - 10.0, "{ll_fit} vs {ll_true}");
+}

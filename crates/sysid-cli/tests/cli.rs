@@ -1,42 +1,9 @@
 //! The `sysid` binary end to end: happy paths, and bad input giving one line on stderr
 //! that names the place, with a non-zero exit code.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-fn scratch_dir() -> PathBuf {
-    static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "sysid-cli-test-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::SeqCst)
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn sysid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sysid"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Asserts failure with exactly one stderr line containing every `needle`.
-fn assert_one_line_error(out: &Output, needles: &[&str]) {
-    assert!(!out.status.success(), "expected failure");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "stderr should be one line: {err}");
-    for n in needles {
-        assert!(err.contains(n), "stderr {err:?} should contain {n:?}");
-    }
-}
+mod common;
+use common::{assert_one_line_error, s, scratch_dir, sysid};
+use std::process::Output;
 
 const SCALAR_MODEL: &str =
     r#"{"a": [[0.9]], "c": [[1.0]], "q": [[1.0]], "r": [[0.5]], "p1": [[1.0]]}"#;

@@ -1,46 +1,11 @@
 //! `sysid n4sid` and `sysid fit lti` end to end: a constrained fit against the exact
 //! maximum-likelihood estimate, and bad input.
 
+mod common;
+use common::{assert_one_line_error, s, scratch_dir, sysid};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-use std::sync::atomic::{AtomicUsize, Ordering};
+
 use sysid::kalman::{KalmanWorkspace, LinearGaussianModel, ModelSpec, Record};
-
-fn scratch_dir() -> PathBuf {
-    static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "sysid-fit-test-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::SeqCst)
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn sysid(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sysid"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn assert_one_line_error(out: &Output, needles: &[&str]) {
-    assert!(
-        !out.status.success(),
-        "expected failure, stdout {}",
-        String::from_utf8_lossy(&out.stdout)
-    );
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(err.lines().count(), 1, "stderr should be one line: {err}");
-    for n in needles {
-        assert!(err.contains(n), "stderr {err:?} should contain {n:?}");
-    }
-}
 
 fn local_level(q: f64, r: f64) -> LinearGaussianModel {
     use nalgebra::dmatrix;

@@ -2,7 +2,7 @@ use super::fix::{apply, parse_fix};
 use super::n4sid::parse_order;
 use crate::DataArgs;
 use crate::error::CliError;
-use crate::files::{ColumnChoice, create_output, read_data, read_model, write_output};
+use crate::files::{create_output, read_model, write_output};
 use nalgebra::{DMatrix, DVector};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -133,13 +133,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         option: "--max-iter/--tol",
         message: e.to_string(),
     })?;
-    let file = read_data(
-        &o.data.data,
-        &ColumnChoice {
-            inputs: o.data.inputs.clone(),
-            outputs: o.data.outputs.clone(),
-        },
-    )?;
+    let file = o.data.read()?;
     let mut spec = LinearEmSpec::default();
     let start = initial_model(o, &file)?;
     let start = apply(start, &mut spec, &fixes, &o.diag)?;

@@ -13,19 +13,21 @@ use crate::files::{ColumnChoice, DataFile, read_data, read_model};
 use std::path::Path;
 use sysid::kalman::LinearGaussianModel;
 
-/// Reads a model and a data file and checks that their columns match.
-pub fn model_and_data(
-    model: &Path,
-    data: &DataArgs,
-) -> Result<(LinearGaussianModel, DataFile), CliError> {
-    let model = read_model(model)?;
-    let file = read_data(
-        &data.data,
-        &ColumnChoice {
-            inputs: data.inputs.clone(),
-            outputs: data.outputs.clone(),
-        },
-    )?;
+impl DataArgs {
+    /// Reads the data file with the chosen columns.
+    pub fn read(&self) -> Result<DataFile, CliError> {
+        read_data(
+            &self.data,
+            &ColumnChoice {
+                inputs: self.inputs.clone(),
+                outputs: self.outputs.clone(),
+            },
+        )
+    }
+}
+
+/// Checks that a data file has as many input and output columns as the model.
+pub fn check_columns(model: &LinearGaussianModel, file: &DataFile) -> Result<(), CliError> {
     for (what, found, expected) in [
         ("input", file.input_names.len(), model.m()),
         ("output", file.output_names.len(), model.p()),
@@ -38,6 +40,17 @@ pub fn model_and_data(
             });
         }
     }
+    Ok(())
+}
+
+/// Reads a model and a data file and checks that their columns match.
+pub fn model_and_data(
+    model: &Path,
+    data: &DataArgs,
+) -> Result<(LinearGaussianModel, DataFile), CliError> {
+    let model = read_model(model)?;
+    let file = data.read()?;
+    check_columns(&model, &file)?;
     Ok((model, file))
 }
 

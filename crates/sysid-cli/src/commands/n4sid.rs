@@ -1,6 +1,6 @@
 use crate::DataArgs;
 use crate::error::CliError;
-use crate::files::{ColumnChoice, read_data, write_output};
+use crate::files::write_output;
 use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
 use sysid::subspace::{N4sidOptions, Order, n4sid};
@@ -42,13 +42,7 @@ pub fn parse_order(order: &str) -> Result<Order, CliError> {
 
 pub fn run(o: &Options) -> Result<(), CliError> {
     let order = parse_order(&o.order)?;
-    let file = read_data(
-        &o.data.data,
-        &ColumnChoice {
-            inputs: o.data.inputs.clone(),
-            outputs: o.data.outputs.clone(),
-        },
-    )?;
+    let file = o.data.read()?;
     let result = n4sid(
         &file.record,
         &N4sidOptions {

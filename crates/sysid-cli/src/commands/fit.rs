@@ -96,18 +96,7 @@ fn initial_model(
             message: format!("{n} differs from the order {} of {}", model.n(), o.init),
         });
     }
-    for (what, found, expected) in [
-        ("input", file.input_names.len(), model.m()),
-        ("output", file.output_names.len(), model.p()),
-    ] {
-        if found != expected {
-            return Err(CliError::ColumnCount {
-                what,
-                found,
-                expected,
-            });
-        }
-    }
+    super::check_columns(&model, file)?;
     Ok(model)
 }
 

@@ -46,6 +46,23 @@ pub fn triangularize_stacked(
 ) {
     assert!(ldr >= cols && r.len() >= ldr * cols.saturating_sub(1) + cols);
     assert!(rows_x == 0 || (ldx >= rows_x && x.len() >= ldx * (cols - 1) + rows_x));
+    // The common state dimensions get a copy compiled for a constant row count, so the
+    // short dot/axpy loops unroll; the arithmetic (and so the result) is the same.
+    match rows_x {
+        1 => stacked_body(r, ldr, x, ldx, 1, cols),
+        2 => stacked_body(r, ldr, x, ldx, 2, cols),
+        3 => stacked_body(r, ldr, x, ldx, 3, cols),
+        4 => stacked_body(r, ldr, x, ldx, 4, cols),
+        5 => stacked_body(r, ldr, x, ldx, 5, cols),
+        6 => stacked_body(r, ldr, x, ldx, 6, cols),
+        7 => stacked_body(r, ldr, x, ldx, 7, cols),
+        8 => stacked_body(r, ldr, x, ldx, 8, cols),
+        _ => stacked_body(r, ldr, x, ldx, rows_x, cols),
+    }
+}
+
+#[inline(always)]
+fn stacked_body(r: &mut [f64], ldr: usize, x: &mut [f64], ldx: usize, rows_x: usize, cols: usize) {
     if rows_x > 0 {
         for j in 0..cols {
             let (head, tail) = x.split_at_mut((j + 1) * ldx);

@@ -17,6 +17,22 @@
 /// assert_eq!(b, [1.0, 2.0]);
 /// ```
 pub fn solve_upper(u: &[f64], ldu: usize, n: usize, b: &mut [f64], ldb: usize, nrhs: usize) {
+    // small sizes get a copy compiled for a constant n (same arithmetic, unrolled loops)
+    match n {
+        1 => solve_upper_body(u, ldu, 1, b, ldb, nrhs),
+        2 => solve_upper_body(u, ldu, 2, b, ldb, nrhs),
+        3 => solve_upper_body(u, ldu, 3, b, ldb, nrhs),
+        4 => solve_upper_body(u, ldu, 4, b, ldb, nrhs),
+        5 => solve_upper_body(u, ldu, 5, b, ldb, nrhs),
+        6 => solve_upper_body(u, ldu, 6, b, ldb, nrhs),
+        7 => solve_upper_body(u, ldu, 7, b, ldb, nrhs),
+        8 => solve_upper_body(u, ldu, 8, b, ldb, nrhs),
+        _ => solve_upper_body(u, ldu, n, b, ldb, nrhs),
+    }
+}
+
+#[inline(always)]
+fn solve_upper_body(u: &[f64], ldu: usize, n: usize, b: &mut [f64], ldb: usize, nrhs: usize) {
     for c in 0..nrhs {
         let x = &mut b[c * ldb..c * ldb + n];
         for i in (0..n).rev() {

@@ -3,7 +3,6 @@
 //! `cargo bench --bench em`
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use nalgebra::DMatrix;
 use std::hint::black_box;
 use sysid::em::EmAlgorithm;
 use sysid::em::linear::{LinearEm, LinearEmSpec};
@@ -19,7 +18,7 @@ fn em(c: &mut Criterion) {
             block_rows: None,
         };
         let start = n4sid(&sim.record, &options).unwrap().model;
-        let start = start.to_builder().s(DMatrix::zeros(8, 2)).build().unwrap();
+        let start = start.without_cross_covariance();
         let records = [sim.record];
         let spec = LinearEmSpec {
             h: false,

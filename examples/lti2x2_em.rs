@@ -4,7 +4,6 @@
 //!
 //! The whole 100-data-set study is `cargo run --release -p sysid-bench -- lti2x2`.
 
-use nalgebra::{DMatrix, DVector};
 use sysid::em::EmOptions;
 use sysid::em::linear::{LinearEmSpec, fit};
 use sysid::prelude::*;
@@ -36,14 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let s = &subspace.singular_values;
     println!("  N4SID singular values: {:.3?} ...", &s[..10]);
     // known: no offset, system at rest; linear EM holds S (set to zero)
-    let start = subspace
-        .model
-        .to_builder()
-        .s(DMatrix::zeros(8, 2))
-        .h(DVector::zeros(2))
-        .mu(DVector::zeros(8))
-        .p1(DMatrix::zeros(8, 8))
-        .build()?;
+    let start = sysid::models::lti2x2_experiment_start(&subspace.model);
     println!(
         "  N4SID: log-likelihood {:.3}, response error {:.4}",
         ws.loglik(&start, &records[0])?,

@@ -11,7 +11,7 @@ use std::time::Instant;
 use sysid::em::linear::{LinearEmSpec, fit};
 use sysid::em::{EmOptions, Termination};
 use sysid::kalman::{KalmanWorkspace, LinearGaussianModel};
-use sysid::models::{System, lti2x2, lti2x2_initial_guess};
+use sysid::models::{System, lti2x2, lti2x2_experiment_start, lti2x2_initial_guess};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
 /// Process-noise covariance given to the paper's initial model (ours: the paper's
@@ -36,19 +36,6 @@ fn termination_name<E>(t: &Termination<E>) -> &'static str {
         Termination::Error { .. } => "error",
         _ => "other",
     }
-}
-
-/// Known facts of the experiment: no offset, the system starts at rest.
-fn at_rest(model: &LinearGaussianModel) -> LinearGaussianModel {
-    let (n, p) = (model.n(), model.p());
-    model
-        .to_builder()
-        .s(DMatrix::zeros(n, p))
-        .h(nalgebra::DVector::zeros(p))
-        .mu(nalgebra::DVector::zeros(n))
-        .p1(DMatrix::zeros(n, n))
-        .build()
-        .expect("a model with S = 0 stays valid")
 }
 
 fn one_dataset(index: usize, args: &Args) -> Vec<Value> {
@@ -91,7 +78,13 @@ fn one_dataset(index: usize, args: &Args) -> Vec<Value> {
     let mut lines = Vec::new();
     let starts: Vec<(&str, Option<LinearGaussianModel>)> = vec![
         ("paper", Some(paper)),
-        ("n4sid", subspace.as_ref().ok().map(|r| at_rest(&r.model))),
+        (
+            "n4sid",
+            subspace
+                .as_ref()
+                .ok()
+                .map(|r| lti2x2_experiment_start(&r.model)),
+        ),
     ];
     for (name, start) in starts {
         let Some(start) = start else {

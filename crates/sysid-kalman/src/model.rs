@@ -121,6 +121,16 @@ impl LinearGaussianModel {
         initial_factor: DMatrix<f64>, "Factor `F` (n x n) with `F'F = P1`.";
     }
 
+    /// The same model with `S = 0` (still valid: `Q` and `R` are PSD on their own).
+    /// Linear EM holds `S` fixed, so a subspace estimate (which has an `S`) is usually
+    /// started from this.
+    pub fn without_cross_covariance(&self) -> LinearGaussianModel {
+        self.to_builder()
+            .s(DMatrix::zeros(self.n(), self.p()))
+            .build()
+            .expect("a valid model without S is valid: Q and R are PSD on their own")
+    }
+
     /// Whether the cross-covariance `S` is identically zero.
     pub fn has_cross_covariance(&self) -> bool {
         self.s.iter().any(|&v| v != 0.0)

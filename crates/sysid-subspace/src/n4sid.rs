@@ -272,13 +272,13 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
     let theta = &lhs * pinv(&rhs);
     let residual = &lhs - &theta * &rhs;
     let mut noise = &residual * residual.transpose() / j as f64;
-    sysid_kalman_symmetrize(&mut noise);
+    sysid_linalg::symmetrize(&mut noise);
     let a = theta.view((0, 0), (n, n)).clone_owned();
     let b = theta.view((0, n), (n, m)).clone_owned();
     let c = theta.view((n, 0), (p, n)).clone_owned();
     let d = theta.view((n, n), (p, m)).clone_owned();
     let mut p1 = &x_i * x_i.transpose() / j as f64;
-    sysid_kalman_symmetrize(&mut p1);
+    sysid_linalg::symmetrize(&mut p1);
     // h = mean(y) - G(1) mean(u)
     let h = if m == 0 {
         y_mean.clone()
@@ -327,12 +327,6 @@ fn non_finite(t: usize, what: &'static str, index: usize, value: f64) -> Subspac
         value,
     }
     .into()
-}
-
-fn sysid_kalman_symmetrize(m: &mut DMatrix<f64>) {
-    let t = m.transpose();
-    *m += t;
-    *m *= 0.5;
 }
 
 /// The order at the largest drop of `ln s_k - ln s_{k+1}`, `k = 1..=min(len - 1, cap)`.

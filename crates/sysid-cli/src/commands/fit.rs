@@ -3,7 +3,7 @@ use super::n4sid::parse_order;
 use crate::DataArgs;
 use crate::error::CliError;
 use crate::files::{create_output, read_model, write_output};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use sysid::em::linear::{LinearEmSpec, fit};
@@ -74,13 +74,12 @@ fn initial_model(
                 block_rows: None,
             },
         )?;
-        let (n, p) = (result.model.n(), result.model.p());
         // linear EM holds S fixed; start from the subspace model without it
         return result
             .model
+            .without_cross_covariance()
             .to_builder()
-            .s(DMatrix::zeros(n, p))
-            .mu(DVector::zeros(n))
+            .mu(DVector::zeros(result.model.n()))
             .build()
             .map_err(|source| CliError::Kalman {
                 context: "n4sid start".into(),

@@ -75,6 +75,48 @@ fn regress(factor: &DMatrix<f64>, block: &Block<'_>, steps: f64) -> Fit {
     }
 }
 
+/// Regresses the rows `targets` of `c` on regressor groups `(estimate, range in c,
+/// current coefficients)`: estimated groups are free regressors, the others are moved
+/// to the left-hand side with their current coefficients. Returns the new coefficients
+/// of each estimated group (`None` for fixed ones) and the residual covariance.
+fn fit_block(
+    factor: &DMatrix<f64>,
+    targets: std::ops::Range<usize>,
+    groups: &[(bool, std::ops::Range<usize>, &DMatrix<f64>)],
+    steps: f64,
+) -> (Vec<Option<DMatrix<f64>>>, DMatrix<f64>) {
+    let mut free = Vec::new();
+    let mut fixed = Vec::new();
+    for (estimate, range, current) in groups {
+        if *estimate {
+            free.extend(range.clone());
+        } else {
+            fixed.push((range.clone(), *current));
+        }
+    }
+    let fit = regress(
+        factor,
+        &Block {
+            targets,
+            free,
+            fixed,
+        },
+        steps,
+    );
+    let mut col = 0;
+    let coef = groups
+        .iter()
+        .map(|(estimate, range, _)| {
+            estimate.then(|| {
+                let block = fit.coef.columns(col, range.len()).clone_owned();
+                col += range.len();
+                block
+            })
+        })
+        .collect();
+    (coef, fit.cov)
+}
+
 pub(super) fn structured(
     cov: DMatrix<f64>,
     structure: Covariance,
@@ -137,83 +179,40 @@ pub fn m_step(
     let mut builder = model.to_builder();
 
     // ---- state block: x_{t+1} on [x_t; u_t] ----
-    let estimate_state = spec.a || spec.b || spec.q != Covariance::Fixed;
-    if estimate_state {
-        let mut free = Vec::new();
-        let mut fixed = Vec::new();
-        if spec.a {
-            free.extend(ox..ox + n)
-        } else {
-            fixed.push((ox..ox + n, model.a()))
+    if spec.a || spec.b || spec.q != Covariance::Fixed {
+        let groups = [
+            (spec.a, ox..ox + n, model.a()),
+            (spec.b, ou..ou + m, model.b()),
+        ];
+        let (coef, cov) = fit_block(&factor, oxn..oxn + n, &groups, steps);
+        if let Some(a) = coef[0].clone() {
+            builder = builder.a(a);
         }
-        if spec.b {
-            free.extend(ou..ou + m)
-        } else {
-            fixed.push((ou..ou + m, model.b()))
+        if let Some(b) = coef[1].clone() {
+            builder = builder.b(b);
         }
-        let fit = regress(
-            &factor,
-            &Block {
-                targets: oxn..oxn + n,
-                free,
-                fixed,
-            },
-            steps,
-        );
-        let mut col = 0;
-        if spec.a {
-            builder = builder.a(fit.coef.columns(col, n).clone_owned());
-            col += n;
-        }
-        if spec.b {
-            builder = builder.b(fit.coef.columns(col, m).clone_owned());
-        }
-        builder = builder.q(structured(fit.cov, spec.q, model.q()));
+        builder = builder.q(structured(cov, spec.q, model.q()));
     }
 
     // ---- output block: y_t on [x_t; u_t; 1] ----
-    let estimate_output = spec.c || spec.d || spec.h || spec.r != Covariance::Fixed;
-    if estimate_output {
+    if spec.c || spec.d || spec.h || spec.r != Covariance::Fixed {
         let h_column = DMatrix::from_column_slice(p, 1, model.h().as_slice());
-        let mut free = Vec::new();
-        let mut fixed = Vec::new();
-        if spec.c {
-            free.extend(ox..ox + n)
-        } else {
-            fixed.push((ox..ox + n, model.c()))
+        let groups = [
+            (spec.c, ox..ox + n, model.c()),
+            (spec.d, ou..ou + m, model.d()),
+            (spec.h, o1..o1 + 1, &h_column),
+        ];
+        let (coef, cov) = fit_block(&factor, oy..oy + p, &groups, steps);
+        if let Some(c) = coef[0].clone() {
+            builder = builder.c(c);
         }
-        if spec.d {
-            free.extend(ou..ou + m)
-        } else {
-            fixed.push((ou..ou + m, model.d()))
+        if let Some(d) = coef[1].clone() {
+            builder = builder.d(d);
         }
-        if spec.h {
-            free.push(o1)
-        } else {
-            fixed.push((o1..o1 + 1, &h_column))
+        if let Some(h) = &coef[2] {
+            builder = builder.h(h.column(0).clone_owned());
         }
-        let fit = regress(
-            &factor,
-            &Block {
-                targets: oy..oy + p,
-                free,
-                fixed,
-            },
-            steps,
-        );
-        let mut col = 0;
-        if spec.c {
-            builder = builder.c(fit.coef.columns(col, n).clone_owned());
-            col += n;
-        }
-        if spec.d {
-            builder = builder.d(fit.coef.columns(col, m).clone_owned());
-            col += m;
-        }
-        if spec.h {
-            builder = builder.h(fit.coef.column(col).clone_owned());
-        }
-        builder = builder.r(structured(fit.cov, spec.r, model.r()));
+        builder = builder.r(structured(cov, spec.r, model.r()));
     }
 
     builder = initial_state(builder, model, stats, spec);

@@ -7,6 +7,8 @@
 //!   filter, RTS smoother with lag-one covariances, exact log-likelihood with missing
 //!   data, EM sufficient statistics;
 //! * [`subspace`]: N4SID subspace identification (the start of EM);
+//! * [`smc`]: particle filter (four resampling schemes, ESS-adaptive) and particle
+//!   smoothers (Tanizaki, FFBSi, rejection FFBSi, genealogy);
 //! * [`em`]: the EM runner and exact EM for linear Gaussian models;
 //! * [`models`]: the canonical systems of the source papers.
 //!
@@ -23,6 +25,7 @@
 pub use sysid_em as em;
 pub use sysid_kalman as kalman;
 pub use sysid_linalg as linalg;
+pub use sysid_smc as smc;
 pub use sysid_models as models;
 pub use sysid_subspace as subspace;
 
@@ -32,5 +35,8 @@ pub mod prelude {
         KalmanError, KalmanWorkspace, LinearGaussianModel, ModelSpec, Record, SmootherOutput,
         SufficientStatistics,
     };
-    pub use crate::models::System;
+    pub use crate::models::{LinearGaussianSmc, Nlbench, NlbenchParams, System};
+    pub use crate::smc::{
+        FilterOptions, ParticleFilter, Resampling, Series, SmcError, Smoother, Trajectories,
+    };
 }

@@ -5,6 +5,16 @@
 //! | --- | --- | --- |
 //! | [`lgss`] | scalar `x' = 0.9 x + w`, `y = x + e`, `Var w = 1`, `Var e = 0.5` | the usual particle-filter test model |
 //! | [`lti2x2`] | 2-input 2-output system of McMillan degree 8 | Gibson and Ninness (2005), ALGORITHMS.md 1.5 |
+//! | [`Nlbench`] | `x' = a x + b x/(1+x^2) + c cos(1.2 t) + w`, `y = d x^2 + e` | Schön, Wills and Ninness (2006), ALGORITHMS.md 3 |
+//!
+//! [`LinearGaussianSmc`] lets any linear Gaussian model run through the particle
+//! methods of `sysid-smc`, which is how they are checked against the Kalman answer.
+
+mod linear_smc;
+mod nlbench;
+
+pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
+pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
 
 use nalgebra::{DMatrix, dmatrix};
 use rand::SeedableRng;

@@ -1,0 +1,269 @@
+//! A linear Gaussian model of `sysid-kalman` used as an SMC model, so that particle
+//! methods can be checked against the exact Kalman answer.
+
+use nalgebra::DMatrix;
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use sysid_kalman::LinearGaussianModel;
+use sysid_linalg::{LinalgError, cholesky_upper};
+use sysid_smc::{
+    InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
+    TransitionSampler,
+};
+
+const LN_2PI: f64 = 1.837_877_066_409_345_5;
+
+/// Largest state or output dimension the adapter takes (it keeps per-particle work on
+/// the stack).
+pub const MAX_DIM: usize = 16;
+
+/// Why a linear Gaussian model cannot be used as an SMC model.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum AdapterError {
+    /// The bootstrap filter needs independent process and measurement noises.
+    #[error("the SMC adapter needs S = 0 (independent process and measurement noise)")]
+    CrossCovariance,
+    /// Q or R is singular, so the transition or observation density does not exist.
+    #[error("the SMC adapter needs a positive definite covariance: {0}")]
+    Singular(#[from] LinalgError),
+    /// A dimension above [`MAX_DIM`].
+    #[error("the SMC adapter takes at most {MAX_DIM} states and outputs, got n = {n}, p = {p}")]
+    TooLarge {
+        /// States.
+        n: usize,
+        /// Outputs.
+        p: usize,
+    },
+}
+
+/// Row-major copy of a matrix.
+fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+    m.transpose().as_slice().to_vec()
+}
+
+/// A [`LinearGaussianModel`] seen through the SMC capability traits.
+///
+/// # Model
+/// ```text
+/// x_{t+1} = A x_t + B u_t + w_t,  w_t ~ N(0, Q)
+/// y_t     = C x_t + D u_t + h + e_t,  e_t ~ N(0, R),   x_0 ~ N(mu, P1)
+/// ```
+/// with `S = 0`, `Q` and `R` positive definite (`P1` may be singular). Partially
+/// missing outputs (NaN entries) use the marginal density of the observed entries.
+///
+/// # Example
+/// ```
+/// let smc = sysid_models::LinearGaussianSmc::new(&sysid_models::lgss()).unwrap();
+/// assert_eq!(sysid_smc::StateSpace::state_dim(&smc), 1);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearGaussianSmc {
+    n: usize,
+    m: usize,
+    p: usize,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    c: Vec<f64>,
+    d: Vec<f64>,
+    h: Vec<f64>,
+    mu: Vec<f64>,
+    /// `F'` (row-major) with `F'F = P1`, so that `x_0 = mu + F' z`.
+    initial: Vec<f64>,
+    /// Lower Cholesky factor of Q, row-major.
+    q_lower: Vec<f64>,
+    /// Lower Cholesky factor of R, row-major.
+    r_lower: Vec<f64>,
+    r_full: Vec<f64>,
+    log_norm_q: f64,
+    log_norm_r: f64,
+}
+
+impl LinearGaussianSmc {
+    /// Wraps a model. Errors when `S != 0`, when `Q` or `R` is not positive definite,
+    /// or when a dimension exceeds [`MAX_DIM`].
+    pub fn new(model: &LinearGaussianModel) -> Result<Self, AdapterError> {
+        let (n, m, p) = (model.n(), model.m(), model.p());
+        if n > MAX_DIM || p > MAX_DIM {
+            return Err(AdapterError::TooLarge { n, p });
+        }
+        if model.has_cross_covariance() {
+            return Err(AdapterError::CrossCovariance);
+        }
+        let q_upper = cholesky_upper("Q", model.q())?;
+        let r_upper = cholesky_upper("R", model.r())?;
+        let half_logdet = |u: &DMatrix<f64>| (0..u.nrows()).map(|i| u[(i, i)].ln()).sum::<f64>();
+        Ok(LinearGaussianSmc {
+            n,
+            m,
+            p,
+            a: row_major(model.a()),
+            b: row_major(model.b()),
+            c: row_major(model.c()),
+            d: row_major(model.d()),
+            h: model.h().as_slice().to_vec(),
+            mu: model.mu().as_slice().to_vec(),
+            initial: row_major(&model.initial_factor().transpose()),
+            log_norm_q: -0.5 * n as f64 * LN_2PI - half_logdet(&q_upper),
+            log_norm_r: -0.5 * p as f64 * LN_2PI - half_logdet(&r_upper),
+            q_lower: row_major(&q_upper.transpose()),
+            r_lower: row_major(&r_upper.transpose()),
+            r_full: row_major(model.r()),
+        })
+    }
+
+    /// `out = M x` for a row-major `rows x cols` matrix, accumulated onto `out`.
+    #[inline]
+    fn add_product(m: &[f64], cols: usize, x: &[f64], out: &mut [f64]) {
+        if cols == 0 {
+            return;
+        }
+        for (o, row) in out.iter_mut().zip(m.chunks_exact(cols)) {
+            *o += row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+        }
+    }
+
+    /// `A x + B u` into `out`.
+    #[inline]
+    fn transition_mean(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        Self::add_product(&self.a, self.n, x, out);
+        Self::add_product(&self.b, self.m, u, out);
+    }
+
+    /// `|L^{-1} r|^2` for a lower-triangular row-major `L` (forward substitution).
+    #[inline]
+    fn whitened_norm2(lower: &[f64], k: usize, r: &mut [f64]) -> f64 {
+        let mut norm2 = 0.0;
+        for i in 0..k {
+            let row = &lower[i * k..i * k + i];
+            let s = r[i] - row.iter().zip(&r[..i]).map(|(l, v)| l * v).sum::<f64>();
+            r[i] = s / lower[i * k + i];
+            norm2 += r[i] * r[i];
+        }
+        norm2
+    }
+
+    /// The Gaussian log-density of the observed entries of `residual` under the
+    /// corresponding block of R (computed on the fly; used only for partly missing y).
+    fn partial_log_density(&self, residual: &[f64], y: &[f64]) -> f64 {
+        let observed: Vec<usize> = (0..self.p).filter(|&i| !y[i].is_nan()).collect();
+        let k = observed.len();
+        let sub = DMatrix::from_fn(k, k, |i, j| self.r_full[observed[i] * self.p + observed[j]]);
+        let upper = cholesky_upper("R", &sub).expect("a principal block of a PD matrix is PD");
+        let lower = row_major(&upper.transpose());
+        let mut r: Vec<f64> = observed.iter().map(|&i| residual[i]).collect();
+        let norm2 = Self::whitened_norm2(&lower, k, &mut r);
+        let half_logdet: f64 = (0..k).map(|i| upper[(i, i)].ln()).sum();
+        -0.5 * k as f64 * LN_2PI - half_logdet - 0.5 * norm2
+    }
+}
+
+impl StateSpace for LinearGaussianSmc {
+    fn state_dim(&self) -> usize {
+        self.n
+    }
+}
+
+impl InitialSampler for LinearGaussianSmc {
+    fn sample_initial<R: Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+        let mut z = [0.0; MAX_DIM];
+        for v in z[..self.n].iter_mut() {
+            *v = StandardNormal.sample(rng);
+        }
+        x.copy_from_slice(&self.mu);
+        Self::add_product(&self.initial, self.n, &z[..self.n], x);
+    }
+}
+
+impl TransitionSampler for LinearGaussianSmc {
+    fn sample_transition<R: Rng + ?Sized>(
+        &self,
+        _t: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        rng: &mut R,
+    ) {
+        let mut z = [0.0; MAX_DIM];
+        for v in z[..self.n].iter_mut() {
+            *v = StandardNormal.sample(rng);
+        }
+        self.transition_mean(x, u, next);
+        Self::add_product(&self.q_lower, self.n, &z[..self.n], next);
+    }
+}
+
+impl ObservationDensity for LinearGaussianSmc {
+    fn log_observation(&self, _t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {
+        let p = self.p;
+        let mut residual = [0.0; MAX_DIM];
+        let r = &mut residual[..p];
+        r.copy_from_slice(&self.h);
+        Self::add_product(&self.c, self.n, x, r);
+        Self::add_product(&self.d, self.m, u, r);
+        for (ri, &yi) in r.iter_mut().zip(y) {
+            *ri = yi - *ri;
+        }
+        if y.iter().any(|v| v.is_nan()) {
+            return self.partial_log_density(r, y);
+        }
+        self.log_norm_r - 0.5 * Self::whitened_norm2(&self.r_lower, p, r)
+    }
+}
+
+impl TransitionDensity for LinearGaussianSmc {
+    fn log_transition(&self, _t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        let n = self.n;
+        let mut residual = [0.0; MAX_DIM];
+        let r = &mut residual[..n];
+        self.transition_mean(x, u, r);
+        for (ri, &xi) in r.iter_mut().zip(next) {
+            *ri = xi - *ri;
+        }
+        self.log_norm_q - 0.5 * Self::whitened_norm2(&self.q_lower, n, r)
+    }
+
+    fn log_transition_matrix(
+        &self,
+        _t: usize,
+        u: &[f64],
+        from: &[f64],
+        to: &[f64],
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        let n = self.n;
+        let count = from.len() / n;
+        scratch.resize(from.len(), 0.0);
+        for (mean, x) in scratch.chunks_exact_mut(n).zip(from.chunks_exact(n)) {
+            self.transition_mean(x, u, mean);
+        }
+        if n == 1 {
+            let half_inv_q = 0.5 / (self.q_lower[0] * self.q_lower[0]);
+            for (row, &next) in out.chunks_exact_mut(count).zip(to) {
+                for (value, &mean) in row.iter_mut().zip(scratch.iter()) {
+                    let e = next - mean;
+                    *value = self.log_norm_q - half_inv_q * e * e;
+                }
+            }
+            return;
+        }
+        let mut residual = [0.0; MAX_DIM];
+        for (row, next) in out.chunks_exact_mut(count).zip(to.chunks_exact(n)) {
+            for (value, mean) in row.iter_mut().zip(scratch.chunks_exact(n)) {
+                let r = &mut residual[..n];
+                for ((ri, &xi), &mi) in r.iter_mut().zip(next).zip(mean) {
+                    *ri = xi - mi;
+                }
+                *value = self.log_norm_q - 0.5 * Self::whitened_norm2(&self.q_lower, n, r);
+            }
+        }
+    }
+}
+
+impl TransitionBound for LinearGaussianSmc {
+    fn log_transition_bound(&self, _t: usize, _u: &[f64]) -> f64 {
+        self.log_norm_q
+    }
+}

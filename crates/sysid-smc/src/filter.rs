@@ -1,0 +1,342 @@
+//! The bootstrap particle filter.
+//!
+//! # Model
+//! Any [`FilterModel`](crate::FilterModel): `x_0 ~ mu`, `x_{t+1} ~ f(. | x_t)`,
+//! `y_t ~ g(. | x_t)`.
+//!
+//! # Algorithm
+//! Propagate each particle through `f`, weight by `g(y_t | x_t)` in the log domain,
+//! normalise with log-sum-exp, and resample when the effective sample size
+//! `1 / sum W^2` falls below `ess_threshold * M` (a threshold of 1 resamples at every
+//! step, the papers' choice). The log-likelihood estimate is
+//! `log p(y_{0:T-1}) = sum_t log sum_i W_{t-1}^i g(y_t | x_t^i)` with `W_{t-1}` the
+//! normalised weights carried into step `t` (uniform after a resampling), so it stays
+//! correct when resampling is skipped; its exponential is unbiased for `p(y)`.
+//! Steps whose outputs are all missing leave the weights unchanged.
+//!
+//! Particles are processed in fixed chunks of [`CHUNK`] particles, chunk `c` drawing
+//! from the random stream `(seed, c + 1)` and resampling from stream `(seed, 0)`, so
+//! the result is the same with any number of threads, in parallel or not.
+//!
+//! # Complexity
+//! O(T M) time; O(M) memory, plus O(T M) for the stored history.
+//!
+//! # Example
+//! ```
+//! use sysid_smc::{FilterOptions, ParticleFilter, Series};
+//! # use sysid_smc::{StateSpace, InitialSampler, TransitionSampler, ObservationDensity};
+//! # use rand_distr::{Distribution, StandardNormal};
+//! # struct RandomWalk;
+//! # impl StateSpace for RandomWalk { fn state_dim(&self) -> usize { 1 } }
+//! # impl InitialSampler for RandomWalk {
+//! #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+//! #         x[0] = StandardNormal.sample(rng);
+//! #     }
+//! # }
+//! # impl TransitionSampler for RandomWalk {
+//! #     fn sample_transition<R: rand::Rng + ?Sized>(&self, _: usize, x: &[f64], _: &[f64], next: &mut [f64], rng: &mut R) {
+//! #         let w: f64 = StandardNormal.sample(rng);
+//! #         next[0] = x[0] + w;
+//! #     }
+//! # }
+//! # impl ObservationDensity for RandomWalk {
+//! #     fn log_observation(&self, _: usize, x: &[f64], _: &[f64], y: &[f64]) -> f64 {
+//! #         -0.5 * (y[0] - x[0]).powi(2) - 0.5 * (2.0 * std::f64::consts::PI).ln()
+//! #     }
+//! # }
+//! let y = [0.3, 0.1, -0.4, 0.2];
+//! let data = Series::new(&y, 1).unwrap();
+//! let mut pf = ParticleFilter::new(FilterOptions { particles: 500, ..Default::default() }).unwrap();
+//! let run = pf.run(&RandomWalk, &data, 42).unwrap();
+//! assert!(run.loglik.is_finite());
+//! assert_eq!(pf.means().len(), 4);
+//! ```
+//!
+//! # References
+//! Gordon, Salmond and Smith (1993); Schön, Wills and Ninness (2006), Algorithm 3.
+
+use rayon::prelude::*;
+
+use crate::model::FilterModel;
+use crate::resample::{ResampleScratch, Resampling};
+use crate::streams::{Rng, stream};
+use crate::weights::{effective_sample_size, normalise_log_weights};
+use crate::{History, Series, SmcError};
+
+/// Particles per random stream (and per parallel task).
+pub const CHUNK: usize = 1024;
+
+/// Settings of the bootstrap particle filter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FilterOptions {
+    /// Number of particles M (>= 1). Default 1000.
+    pub particles: usize,
+    /// Resampling scheme. Default systematic.
+    pub resampling: Resampling,
+    /// Resample when ESS < `ess_threshold * M`; in (0, 1], and 1 resamples at every
+    /// step. Default 1.
+    pub ess_threshold: f64,
+    /// Keep particles, weights and ancestors for the smoothers. Default false.
+    pub store_history: bool,
+    /// Run the particle chunks in parallel on the current rayon pool. The result does
+    /// not depend on it. Default false.
+    pub parallel: bool,
+}
+
+impl Default for FilterOptions {
+    fn default() -> Self {
+        FilterOptions {
+            particles: 1000,
+            resampling: Resampling::Systematic,
+            ess_threshold: 1.0,
+            store_history: false,
+            parallel: false,
+        }
+    }
+}
+
+impl FilterOptions {
+    /// Checks the ranges of the options.
+    pub fn check(&self) -> Result<(), SmcError> {
+        if self.particles == 0 {
+            return Err(SmcError::InvalidOption {
+                name: "particles",
+                reason: "must be at least 1".into(),
+            });
+        }
+        if !(self.ess_threshold > 0.0 && self.ess_threshold <= 1.0) {
+            return Err(SmcError::InvalidOption {
+                name: "ess_threshold",
+                reason: format!("{} is not in (0, 1]", self.ess_threshold),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Summary of one filter run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FilterSummary {
+    /// The log-likelihood estimate `log p^(y)`.
+    pub loglik: f64,
+    /// Number of steps after which the filter resampled.
+    pub resampled_steps: usize,
+}
+
+/// A bootstrap particle filter with its reusable buffers (the workspace).
+///
+/// See the [module documentation](self) for the algorithm.
+#[derive(Debug, Clone)]
+pub struct ParticleFilter {
+    options: FilterOptions,
+    states: Vec<f64>,
+    previous: Vec<f64>,
+    log_obs: Vec<f64>,
+    log_weights: Vec<f64>,
+    weights: Vec<f64>,
+    ancestors: Vec<usize>,
+    identity: Vec<usize>,
+    scratch: ResampleScratch,
+    rngs: Vec<Rng>,
+    means: Vec<f64>,
+    ess: Vec<f64>,
+    history: History,
+    has_history: bool,
+}
+
+impl ParticleFilter {
+    /// A filter with checked options.
+    pub fn new(options: FilterOptions) -> Result<Self, SmcError> {
+        options.check()?;
+        Ok(ParticleFilter {
+            options,
+            states: Vec::new(),
+            previous: Vec::new(),
+            log_obs: Vec::new(),
+            log_weights: Vec::new(),
+            weights: Vec::new(),
+            ancestors: Vec::new(),
+            identity: Vec::new(),
+            scratch: ResampleScratch::default(),
+            rngs: Vec::new(),
+            means: Vec::new(),
+            ess: Vec::new(),
+            history: History::default(),
+            has_history: false,
+        })
+    }
+
+    /// The options.
+    pub fn options(&self) -> &FilterOptions {
+        &self.options
+    }
+
+    /// The filtered means `sum_i W_t^i x_t^i` of the last run, time-major (T x n).
+    pub fn means(&self) -> &[f64] {
+        &self.means
+    }
+
+    /// The effective sample size at each step of the last run (before resampling).
+    pub fn ess(&self) -> &[f64] {
+        &self.ess
+    }
+
+    /// The stored history of the last run, if `store_history` was set.
+    pub fn history(&self) -> Option<&History> {
+        self.has_history.then_some(&self.history)
+    }
+
+    /// Runs the filter on `data` with the random streams of `seed`.
+    pub fn run<M: FilterModel + Sync>(
+        &mut self,
+        model: &M,
+        data: &Series,
+        seed: u64,
+    ) -> Result<FilterSummary, SmcError> {
+        let n = model.state_dim();
+        let m = self.options.particles;
+        let steps = data.steps();
+        self.prepare(n, m, steps, seed);
+        let uniform_log_weight = -(m as f64).ln();
+        self.log_weights.fill(uniform_log_weight);
+        let mut loglik = 0.0;
+        let mut resampled_steps = 0;
+        let mut resample_rng = stream(seed, 0);
+        for t in 0..steps {
+            self.propagate_and_weigh(model, data, t);
+            let increment = self.reweight(t, data.is_missing(t))?;
+            loglik += increment;
+            self.record(t, n);
+            if t + 1 < steps {
+                let ess = *self.ess.last().expect("recorded");
+                if self.options.ess_threshold >= 1.0 || ess < self.options.ess_threshold * m as f64 {
+                    self.options.resampling.resample(
+                        &self.weights,
+                        &mut resample_rng,
+                        &mut self.ancestors,
+                        &mut self.scratch,
+                    );
+                    self.log_weights.fill(uniform_log_weight);
+                    resampled_steps += 1;
+                    if self.options.store_history {
+                        self.history.mark_resampled(t);
+                    }
+                } else {
+                    self.ancestors.copy_from_slice(&self.identity);
+                }
+                std::mem::swap(&mut self.states, &mut self.previous);
+            }
+        }
+        Ok(FilterSummary { loglik, resampled_steps })
+    }
+
+    fn prepare(&mut self, n: usize, m: usize, steps: usize, seed: u64) {
+        self.states.resize(m * n, 0.0);
+        self.previous.resize(m * n, 0.0);
+        self.log_obs.resize(m, 0.0);
+        self.log_weights.resize(m, 0.0);
+        self.weights.resize(m, 0.0);
+        self.identity.clear();
+        self.identity.extend(0..m);
+        self.ancestors.clear();
+        self.ancestors.extend(0..m);
+        let chunks = m.div_ceil(CHUNK);
+        self.rngs.clear();
+        self.rngs.extend((0..chunks).map(|c| stream(seed, c as u64 + 1)));
+        self.means.clear();
+        self.means.reserve(steps * n);
+        self.ess.clear();
+        self.ess.reserve(steps);
+        self.has_history = self.options.store_history;
+        if self.has_history {
+            self.history.reset(n, m, steps);
+        }
+    }
+
+    /// Draws `x_t` (from `mu` at `t = 0`, else from `f` given the resampled `x_{t-1}`)
+    /// and evaluates `log g(y_t | x_t)`, chunk by chunk.
+    fn propagate_and_weigh<M: FilterModel + Sync>(&mut self, model: &M, data: &Series, t: usize) {
+        let n = model.state_dim();
+        let missing = data.is_missing(t);
+        let previous = &self.previous;
+        let ancestors = &self.ancestors;
+        let work = |chunk: usize, states: &mut [f64], log_obs: &mut [f64], rng: &mut Rng| {
+            if t == 0 {
+                model.sample_initials(states, rng);
+            } else {
+                let parents = &ancestors[chunk * CHUNK..chunk * CHUNK + log_obs.len()];
+                model.sample_transitions(t - 1, data.input(t - 1), previous, parents, states, rng);
+            }
+            if missing {
+                log_obs.fill(0.0);
+            } else {
+                model.log_observations(t, data.input(t), data.output(t), states, log_obs);
+            }
+        };
+        if self.options.parallel && self.rngs.len() > 1 {
+            self.states
+                .par_chunks_mut(CHUNK * n)
+                .zip(self.log_obs.par_chunks_mut(CHUNK))
+                .zip(self.rngs.par_iter_mut())
+                .enumerate()
+                .for_each(|(c, ((states, log_obs), rng))| work(c, states, log_obs, rng));
+        } else {
+            let chunks = self
+                .states
+                .chunks_mut(CHUNK * n)
+                .zip(self.log_obs.chunks_mut(CHUNK))
+                .zip(self.rngs.iter_mut());
+            for (c, ((states, log_obs), rng)) in chunks.enumerate() {
+                work(c, states, log_obs, rng);
+            }
+        }
+    }
+
+    /// Adds the observation log-densities to the carried log-weights, normalises, and
+    /// returns the log-likelihood increment.
+    fn reweight(&mut self, t: usize, missing: bool) -> Result<f64, SmcError> {
+        if missing {
+            // Weights carry over unchanged (already normalised).
+            for (w, &l) in self.weights.iter_mut().zip(&self.log_weights) {
+                *w = l.exp();
+            }
+            return Ok(0.0);
+        }
+        if let Some((particle, &value)) =
+            self.log_obs.iter().enumerate().find(|(_, v)| v.is_nan() || **v == f64::INFINITY)
+        {
+            return Err(SmcError::InvalidDensity {
+                what: "observation log-density",
+                t,
+                particle,
+                value,
+            });
+        }
+        for (l, &lg) in self.log_weights.iter_mut().zip(&self.log_obs) {
+            *l += lg;
+        }
+        let increment = normalise_log_weights(&self.log_weights, &mut self.weights)
+            .ok_or(SmcError::DegenerateWeights { t })?;
+        for l in self.log_weights.iter_mut() {
+            *l -= increment;
+        }
+        Ok(increment)
+    }
+
+    /// Stores the filtered mean, the ESS and (optionally) the history of step `t`.
+    fn record(&mut self, _t: usize, n: usize) {
+        let start = self.means.len();
+        self.means.resize(start + n, 0.0);
+        let mean = &mut self.means[start..];
+        for (x, &w) in self.states.chunks_exact(n).zip(&self.weights) {
+            for (acc, &xi) in mean.iter_mut().zip(x) {
+                *acc += w * xi;
+            }
+        }
+        self.ess.push(effective_sample_size(&self.weights));
+        if self.has_history {
+            self.history
+                .push(&self.states, &self.weights, &self.log_weights, &self.ancestors);
+        }
+    }
+}

@@ -1,0 +1,53 @@
+//! Sequential Monte Carlo for nonlinear state-space models: the bootstrap particle
+//! filter with four resampling schemes and ESS-adaptive resampling, and the particle
+//! smoothers of the source papers (Tanizaki, FFBSi, rejection FFBSi, genealogy).
+//!
+//! # Model
+//! ```text
+//! x_0 ~ mu,   x_{t+1} ~ f(. | x_t, u_t, t),   y_t ~ g(. | x_t, u_t, t)
+//! ```
+//! A model implements the capabilities an algorithm needs ([`InitialSampler`],
+//! [`TransitionSampler`], [`ObservationDensity`], [`TransitionDensity`],
+//! [`TransitionBound`]).
+//!
+//! # Algorithm
+//! [`ParticleFilter`] runs the bootstrap filter and keeps (optionally) a [`History`];
+//! the smoothers of [`smoother`] draw backward trajectories from it or accumulate
+//! additive functionals. Weights live in the log domain; random streams are derived
+//! from `(seed, piece)` so results are bit-identical for any number of threads.
+//!
+//! # Complexity
+//! Filter O(T M); smoothers between O(T K) and O(T K M), see [`smoother`].
+//!
+//! # References
+//! Schön, Wills and Ninness (2006); Lindsten and Schön (2013), *Backward simulation
+//! methods for Monte Carlo statistical inference*; Chopin and Papaspiliopoulos (2020).
+
+mod error;
+pub mod filter;
+mod history;
+mod model;
+pub mod resample;
+mod series;
+mod simd;
+pub mod smoother;
+mod streams;
+mod vexp;
+pub mod weights;
+
+pub use error::SmcError;
+pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
+pub use history::History;
+pub use model::{
+    FilterModel, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
+    TransitionDensity, TransitionSampler,
+};
+pub use resample::Resampling;
+pub use series::Series;
+pub use smoother::{
+    AdditiveFunctional, Ffbsi, FfbsiReject, Genealogy, Smoother, SmootherStats, Tanizaki,
+    Trajectories,
+};
+pub use streams::{Rng, stream};
+pub use vexp::{exp_shifted_sum, exp_shifted_sum_portable};
+pub use weights::normalise_log_weights;

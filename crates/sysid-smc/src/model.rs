@@ -1,0 +1,127 @@
+//! What a state-space model can do, as separate capabilities.
+//!
+//! # Model
+//! ```text
+//! x_0     ~ mu(x)
+//! x_{t+1} ~ f(x_{t+1} | x_t, u_t, t)
+//! y_t     ~ g(y_t | x_t, u_t, t)
+//! ```
+//! The parameters theta are the model value itself: a model is a cheap value that an
+//! estimator re-creates for every new theta. Time `t` is the 0-based index of the data
+//! (`t = 0` is the first sample); `u` is `u_t` (empty without inputs).
+//!
+//! Each algorithm asks only for what it needs: the bootstrap filter for
+//! [`InitialSampler`], [`TransitionSampler`] and [`ObservationDensity`]; the backward
+//! smoothers also for [`TransitionDensity`]; rejection FFBSi also for [`TransitionBound`].
+//! A missing capability is a compile-time error, not a run-time one.
+
+/// The state dimension, shared by every capability.
+pub trait StateSpace {
+    /// Dimension of `x`.
+    fn state_dim(&self) -> usize;
+}
+
+/// Draws `x_0 ~ mu`.
+pub trait InitialSampler: StateSpace {
+    /// Writes a draw of the initial state into `x` (length `state_dim`).
+    fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R);
+
+    /// Fills `states` (particle-major) with independent draws. The default calls
+    /// [`sample_initial`](Self::sample_initial) for each particle in order.
+    fn sample_initials<R: rand::Rng + ?Sized>(&self, states: &mut [f64], rng: &mut R) {
+        for x in states.chunks_exact_mut(self.state_dim()) {
+            self.sample_initial(x, rng);
+        }
+    }
+}
+
+/// Draws `x_{t+1} ~ f(. | x_t, u_t, t)`.
+pub trait TransitionSampler: StateSpace {
+    /// Writes a draw of the next state into `next`.
+    fn sample_transition<R: rand::Rng + ?Sized>(
+        &self,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &mut [f64],
+        rng: &mut R,
+    );
+
+    /// Propagates many particles: `next_k ~ f(. | from_{parents[k]})`, in order of `k`.
+    /// The default calls [`sample_transition`](Self::sample_transition) per particle;
+    /// models override it to hoist per-step work and vectorise the deterministic part.
+    fn sample_transitions<R: rand::Rng + ?Sized>(
+        &self,
+        t: usize,
+        u: &[f64],
+        from: &[f64],
+        parents: &[usize],
+        next: &mut [f64],
+        rng: &mut R,
+    ) {
+        let n = self.state_dim();
+        for (x, &p) in next.chunks_exact_mut(n).zip(parents) {
+            self.sample_transition(t, &from[p * n..(p + 1) * n], u, x, rng);
+        }
+    }
+}
+
+/// `log g(y_t | x_t, u_t, t)`.
+pub trait ObservationDensity: StateSpace {
+    /// The observation log-density. `y` may hold NaN entries (missing) when only some
+    /// outputs are missing; steps where every entry is missing are skipped by the
+    /// filters and never reach the model. Returning `-inf` is allowed (impossible
+    /// observation); NaN and `+inf` are reported as errors by the filters.
+    fn log_observation(&self, t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64;
+
+    /// `out[k] = log g(y | states_k)` for many particles. The default calls
+    /// [`log_observation`](Self::log_observation) per particle.
+    fn log_observations(&self, t: usize, u: &[f64], y: &[f64], states: &[f64], out: &mut [f64]) {
+        for (lg, x) in out.iter_mut().zip(states.chunks_exact(self.state_dim())) {
+            *lg = self.log_observation(t, x, u, y);
+        }
+    }
+}
+
+/// `log f(x_{t+1} | x_t, u_t, t)`, needed by the backward smoothers.
+pub trait TransitionDensity: StateSpace {
+    /// The transition log-density of `next` given `x`.
+    fn log_transition(&self, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64;
+
+    /// All pairs at once: `out[j * m + i] = log f(to_j | from_i)` for the `m` particles
+    /// of `from` and the `k` particles of `to` (both particle-major, stride
+    /// `state_dim`). `scratch` is the caller's reusable buffer, for example for the
+    /// transition means of `from`.
+    ///
+    /// The default calls [`log_transition`](Self::log_transition) per pair; models
+    /// override it to share work across pairs and let the compiler vectorise.
+    fn log_transition_matrix(
+        &self,
+        t: usize,
+        u: &[f64],
+        from: &[f64],
+        to: &[f64],
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        let _ = scratch;
+        let n = self.state_dim();
+        let m = from.len() / n;
+        for (row, next) in out.chunks_exact_mut(m).zip(to.chunks_exact(n)) {
+            for (value, x) in row.iter_mut().zip(from.chunks_exact(n)) {
+                *value = self.log_transition(t, x, u, next);
+            }
+        }
+    }
+}
+
+/// An upper bound `log c >= log f(x' | x, u_t, t)` for all `x, x'`, needed by
+/// rejection-sampling FFBSi.
+pub trait TransitionBound: TransitionDensity {
+    /// `log c` at time `t`.
+    fn log_transition_bound(&self, t: usize, u: &[f64]) -> f64;
+}
+
+/// Everything the bootstrap particle filter needs.
+pub trait FilterModel: InitialSampler + TransitionSampler + ObservationDensity {}
+impl<M: InitialSampler + TransitionSampler + ObservationDensity> FilterModel for M {}

@@ -1,0 +1,144 @@
+//! The exact O(M) backward draw per path: FFBSi's kernel, also Tanizaki's.
+
+use rand::RngExt;
+
+use super::SmootherStats;
+use crate::simd::Kernel;
+use super::backward::{BackwardStep, backward_error};
+use crate::model::TransitionDensity;
+use crate::streams::Rng;
+use crate::vexp::exp_shifted_sum;
+use crate::weights::{DrawFailure, draw_from_weights, shift_rows_by_max};
+use crate::{History, Series, SmcError};
+
+/// Which filter cloud the backward kernel draws from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Cloud {
+    /// The weighted filter particles `(x_t^i, W_t^i)` (FFBSi).
+    Weighted,
+    /// The equally weighted resampled particles `x_t^{a_{t+1}^i}` where the filter
+    /// resampled after `t`, else the weighted ones (Tanizaki's smoother).
+    Resampled,
+}
+
+/// Draws index `i` with probability proportional to `W_t^i f(x~_{t+1} | x_t^i)` for each
+/// path, evaluating the whole block's transition densities at once.
+pub(crate) struct ExactStep<'a, M> {
+    pub model: &'a M,
+    pub history: &'a History,
+    pub data: &'a Series<'a>,
+    pub cloud: Cloud,
+    pub matrix: Vec<f64>,
+    pub scratch: Vec<f64>,
+    pub gathered: Vec<f64>,
+    pub stats: SmootherStats,
+}
+
+impl<'a, M: TransitionDensity> ExactStep<'a, M> {
+    pub fn new(model: &'a M, history: &'a History, data: &'a Series<'a>, cloud: Cloud) -> Self {
+        ExactStep {
+            model,
+            history,
+            data,
+            cloud,
+            matrix: Vec::new(),
+            scratch: Vec::new(),
+            gathered: Vec::new(),
+            stats: SmootherStats::default(),
+        }
+    }
+}
+
+impl<M: TransitionDensity> BackwardStep for ExactStep<'_, M> {
+    fn step(
+        &mut self,
+        t: usize,
+        next_states: &[f64],
+        _next_indices: &[usize],
+        out: &mut [usize],
+        rng: &mut Rng,
+    ) -> Result<(), SmcError> {
+        crate::simd::dispatch(StepKernel {
+            step: self,
+            t,
+            next_states,
+            out,
+            rng,
+        })
+    }
+
+    fn stats(&self) -> SmootherStats {
+        self.stats
+    }
+}
+
+struct StepKernel<'s, 'a, 'd, M> {
+    step: &'s mut ExactStep<'a, M>,
+    t: usize,
+    next_states: &'d [f64],
+    out: &'d mut [usize],
+    rng: &'d mut Rng,
+}
+
+impl<M: TransitionDensity> Kernel for StepKernel<'_, '_, '_, M> {
+    type Output = Result<(), SmcError>;
+
+    #[inline(always)]
+    fn run(self) -> Self::Output {
+        self.step.step_kernel(self.t, self.next_states, self.out, self.rng)
+    }
+}
+
+impl<M: TransitionDensity> ExactStep<'_, M> {
+    #[inline(always)]
+    fn step_kernel(
+        &mut self,
+        t: usize,
+        next_states: &[f64],
+        out: &mut [usize],
+        rng: &mut Rng,
+    ) -> Result<(), SmcError> {
+        let n = self.history.state_dim();
+        let m = self.history.particles();
+        let resampled = self.cloud == Cloud::Resampled && self.history.resampled_after(t);
+        let cloud: &[f64] = if resampled {
+            let states = self.history.states(t);
+            self.gathered.clear();
+            for &a in self.history.ancestors(t + 1) {
+                self.gathered.extend_from_slice(&states[a * n..(a + 1) * n]);
+            }
+            &self.gathered
+        } else {
+            self.history.states(t)
+        };
+        self.matrix.resize(out.len() * m, 0.0);
+        self.model.log_transition_matrix(
+            t,
+            self.data.input(t),
+            cloud,
+            next_states,
+            &mut self.matrix,
+            &mut self.scratch,
+        );
+        if !resampled {
+            let log_weights = self.history.log_weights(t);
+            for row in self.matrix.chunks_exact_mut(m) {
+                for (l, &lw) in row.iter_mut().zip(log_weights) {
+                    *l += lw;
+                }
+            }
+        }
+        // One long exp over the whole block (rows shifted by their maxima first) keeps
+        // the vector pipeline full; then one blocked scan per row.
+        shift_rows_by_max(&mut self.matrix, m).map_err(|(k, f)| backward_error(f, t, k))?;
+        exp_shifted_sum(&mut self.matrix, 0.0);
+        for (k, (row, slot)) in self.matrix.chunks_exact(m).zip(out.iter_mut()).enumerate() {
+            let i = draw_from_weights(row, rng.random())
+                .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
+            *slot = if resampled { self.history.ancestors(t + 1)[i] } else { i };
+        }
+        self.stats.density_evaluations += (out.len() * m) as u64;
+        Ok(())
+    }
+
+}

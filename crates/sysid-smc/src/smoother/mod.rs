@@ -1,0 +1,266 @@
+//! Particle smoothers over a stored filter [`History`].
+//!
+//! # Algorithm
+//! Every smoother draws paths backwards from `x~_{T-1} ~ Cat(W_{T-1})`:
+//!
+//! | smoother | backward draw at `t` | cost | needs |
+//! | --- | --- | --- | --- |
+//! | [`Genealogy`] | the filter's ancestor of the path | O(T K) | nothing |
+//! | [`Ffbsi`] | `i` with prob. ∝ `W_t^i f(x~_{t+1} \| x_t^i)` | O(T K M) | [`TransitionDensity`] |
+//! | [`Tanizaki`] | as FFBSi, over the equally weighted resampled cloud, K = M | O(T M²) | [`TransitionDensity`] |
+//! | [`FfbsiReject`] | propose `i ~ Cat(W_t)`, accept w.p. `f / c`; exact draw after `max_trials` | expected O(T K) | [`TransitionBound`] |
+//!
+//! Paths are drawn in blocks of [`PATH_BLOCK`]; block `b` uses the random stream
+//! `(seed, b)`, so results do not depend on the thread count.
+//!
+//! Each smoother gives either the trajectories ([`Smoother::trajectories`]) or, without
+//! storing them, the smoothed sum of an additive functional
+//! ([`Smoother::additive`]), which is what EM's E-step needs.
+//!
+//! # Complexity
+//! See the table; memory O(T K n) for trajectories, O(K M) for the additive form.
+//!
+//! # References
+//! Tanizaki (2001); Schön, Wills and Ninness (2006), Algorithm 4; Godsill, Doucet and
+//! West (2004); Douc, Garivier, Moulines and Olsson (2011); Dau and Chopin (2023).
+//!
+//! [`TransitionDensity`]: crate::TransitionDensity
+//! [`TransitionBound`]: crate::TransitionBound
+
+mod backward;
+mod exact;
+mod genealogy;
+mod paths;
+mod reject;
+
+pub use backward::PATH_BLOCK;
+pub use paths::{AdditiveFunctional, Trajectories};
+
+use crate::model::{StateSpace, TransitionBound, TransitionDensity};
+use crate::{History, Series, SmcError};
+use exact::{Cloud, ExactStep};
+use genealogy::GenealogyStep;
+use reject::{RejectStep, cumulative_weights};
+
+/// Work done by a smoother.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SmootherStats {
+    /// Transition-density evaluations.
+    pub density_evaluations: u64,
+    /// Rejection-sampling proposals (rejection FFBSi only).
+    pub trials: u64,
+    /// Draws that reached the trial cap and fell back to the exact draw.
+    pub fallbacks: u64,
+}
+
+impl SmootherStats {
+    fn merge(&mut self, other: &SmootherStats) {
+        self.density_evaluations += other.density_evaluations;
+        self.trials += other.trials;
+        self.fallbacks += other.fallbacks;
+    }
+}
+
+/// A particle smoother usable with model `M`.
+pub trait Smoother<M> {
+    /// Draws smoothed trajectories from the filter history.
+    fn trajectories(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+    ) -> Result<(Trajectories, SmootherStats), SmcError>;
+
+    /// Accumulates the smoothed sum of an additive functional without storing the
+    /// trajectories. Each path contributes with weight `1 / K`.
+    fn additive<F: AdditiveFunctional + ?Sized>(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+        functional: &mut F,
+    ) -> Result<SmootherStats, SmcError>;
+}
+
+fn check_history(history: &History, data: &Series) -> Result<(), SmcError> {
+    if history.steps() != data.steps() {
+        return Err(SmcError::HistoryMismatch {
+            history: history.steps(),
+            data: data.steps(),
+        });
+    }
+    Ok(())
+}
+
+/// Ancestor tracing: follow the filter's genealogy back from `K` draws at `T - 1`.
+/// Cheap, but the paths collapse onto few ancestors far from `T` (path degeneracy).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Genealogy {
+    /// Number of paths K.
+    pub paths: usize,
+}
+
+impl<M: StateSpace> Smoother<M> for Genealogy {
+    fn trajectories(
+        &self,
+        _model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+    ) -> Result<(Trajectories, SmootherStats), SmcError> {
+        check_history(history, data)?;
+        backward::trajectories(history, self.paths, seed, false, || GenealogyStep { history })
+    }
+
+    fn additive<F: AdditiveFunctional + ?Sized>(
+        &self,
+        _model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+        functional: &mut F,
+    ) -> Result<SmootherStats, SmcError> {
+        check_history(history, data)?;
+        backward::additive(history, self.paths, seed, GenealogyStep { history }, functional)
+    }
+}
+
+/// Forward filtering, backward simulation with the exact O(M) draw per path and step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ffbsi {
+    /// Number of paths K.
+    pub paths: usize,
+    /// Draw blocks of paths in parallel (same result either way).
+    pub parallel: bool,
+}
+
+impl<M: TransitionDensity + Sync> Smoother<M> for Ffbsi {
+    fn trajectories(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+    ) -> Result<(Trajectories, SmootherStats), SmcError> {
+        check_history(history, data)?;
+        backward::trajectories(history, self.paths, seed, self.parallel, || {
+            ExactStep::new(model, history, data, Cloud::Weighted)
+        })
+    }
+
+    fn additive<F: AdditiveFunctional + ?Sized>(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+        functional: &mut F,
+    ) -> Result<SmootherStats, SmcError> {
+        check_history(history, data)?;
+        let step = ExactStep::new(model, history, data, Cloud::Weighted);
+        backward::additive(history, self.paths, seed, step, functional)
+    }
+}
+
+/// Tanizaki's pairwise resampling smoother (seed 000, Algorithm 4): `M` smoothed
+/// particles, each resampled at every step among the equally weighted filter particles
+/// with probabilities ∝ `f(x~_{t+1} | x_{t|t}^i)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Tanizaki {
+    /// Draw blocks of paths in parallel (same result either way).
+    pub parallel: bool,
+}
+
+impl<M: TransitionDensity + Sync> Smoother<M> for Tanizaki {
+    fn trajectories(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+    ) -> Result<(Trajectories, SmootherStats), SmcError> {
+        check_history(history, data)?;
+        backward::trajectories(history, history.particles(), seed, self.parallel, || {
+            ExactStep::new(model, history, data, Cloud::Resampled)
+        })
+    }
+
+    fn additive<F: AdditiveFunctional + ?Sized>(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+        functional: &mut F,
+    ) -> Result<SmootherStats, SmcError> {
+        check_history(history, data)?;
+        let step = ExactStep::new(model, history, data, Cloud::Resampled);
+        backward::additive(history, history.particles(), seed, step, functional)
+    }
+}
+
+/// FFBSi by rejection sampling with a trial cap and an exact fallback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FfbsiReject {
+    /// Number of paths K.
+    pub paths: usize,
+    /// Proposals per draw before the exact O(M) fallback; `None` means M (the
+    /// suggestion of ALGORITHMS.md 2.3), which bounds the cost of a draw by about
+    /// twice that of the exact draw.
+    pub max_trials: Option<usize>,
+    /// Draw blocks of paths in parallel (same result either way).
+    pub parallel: bool,
+}
+
+impl FfbsiReject {
+    fn step<'a, M: TransitionBound>(
+        &self,
+        model: &'a M,
+        history: &'a History,
+        data: &'a Series<'a>,
+        cumulative: &'a [f64],
+    ) -> RejectStep<'a, M> {
+        RejectStep {
+            model,
+            history,
+            data,
+            cumulative,
+            max_trials: self.max_trials.unwrap_or(history.particles()),
+            row: Vec::new(),
+            scratch: Vec::new(),
+            stats: SmootherStats::default(),
+        }
+    }
+}
+
+impl<M: TransitionBound + Sync> Smoother<M> for FfbsiReject {
+    fn trajectories(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+    ) -> Result<(Trajectories, SmootherStats), SmcError> {
+        check_history(history, data)?;
+        let cumulative = cumulative_weights(history);
+        backward::trajectories(history, self.paths, seed, self.parallel, || {
+            self.step(model, history, data, &cumulative)
+        })
+    }
+
+    fn additive<F: AdditiveFunctional + ?Sized>(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+        functional: &mut F,
+    ) -> Result<SmootherStats, SmcError> {
+        check_history(history, data)?;
+        let cumulative = cumulative_weights(history);
+        let step = self.step(model, history, data, &cumulative);
+        backward::additive(history, self.paths, seed, step, functional)
+    }
+}

@@ -1,0 +1,135 @@
+//! Smoothed trajectories and additive functionals of them.
+
+/// `K` smoothed trajectories `x~_{0:T-1}^k`, stored time-major: the `K` states of step
+/// `t` are contiguous (path-major within the step, stride `state_dim`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectories {
+    steps: usize,
+    paths: usize,
+    state_dim: usize,
+    states: Vec<f64>,
+}
+
+impl Trajectories {
+    pub(crate) fn zeros(steps: usize, paths: usize, state_dim: usize) -> Self {
+        Trajectories {
+            steps,
+            paths,
+            state_dim,
+            states: vec![0.0; steps * paths * state_dim],
+        }
+    }
+
+    /// Number of steps T.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Number of trajectories K.
+    pub fn paths(&self) -> usize {
+        self.paths
+    }
+
+    /// State dimension.
+    pub fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    /// The `K` states at step `t`, path-major.
+    pub fn states(&self, t: usize) -> &[f64] {
+        let len = self.paths * self.state_dim;
+        &self.states[t * len..(t + 1) * len]
+    }
+
+    pub(crate) fn states_mut(&mut self, t: usize) -> &mut [f64] {
+        let len = self.paths * self.state_dim;
+        &mut self.states[t * len..(t + 1) * len]
+    }
+
+    /// The state of path `k` at step `t`.
+    pub fn state(&self, t: usize, k: usize) -> &[f64] {
+        let n = self.state_dim;
+        &self.states(t)[k * n..(k + 1) * n]
+    }
+
+    /// The smoothed means `(1/K) sum_k x~_t^k`, time-major (T x n).
+    pub fn means(&self) -> Vec<f64> {
+        let n = self.state_dim;
+        let mut out = vec![0.0; self.steps * n];
+        for (t, mean) in out.chunks_exact_mut(n).enumerate() {
+            for x in self.states(t).chunks_exact(n) {
+                for (m, &v) in mean.iter_mut().zip(x) {
+                    *m += v;
+                }
+            }
+            mean.iter_mut().for_each(|m| *m /= self.paths as f64);
+        }
+        out
+    }
+
+    /// The smoothed standard deviations across paths (divisor K - 1; 0 for K = 1).
+    pub fn std_devs(&self) -> Vec<f64> {
+        let n = self.state_dim;
+        let means = self.means();
+        let mut out = vec![0.0; self.steps * n];
+        let denom = self.paths.saturating_sub(1).max(1) as f64;
+        for (t, sd) in out.chunks_exact_mut(n).enumerate() {
+            for x in self.states(t).chunks_exact(n) {
+                for ((s, &v), &m) in sd.iter_mut().zip(x).zip(&means[t * n..(t + 1) * n]) {
+                    *s += (v - m) * (v - m);
+                }
+            }
+            sd.iter_mut().for_each(|s| *s = (*s / denom).sqrt());
+        }
+        out
+    }
+
+    /// Feeds every pair of the trajectories to an additive functional with weight
+    /// `1 / K`, giving the smoothed sum `E[sum_t s(t, x_t, x_{t+1}) | y]`.
+    pub fn accumulate<F: AdditiveFunctional + ?Sized>(&self, functional: &mut F) {
+        let weight = 1.0 / self.paths as f64;
+        let n = self.state_dim;
+        for t in 0..self.steps {
+            let next = (t + 1 < self.steps).then(|| self.states(t + 1));
+            for (k, x) in self.states(t).chunks_exact(n).enumerate() {
+                functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
+            }
+        }
+    }
+
+    /// Concatenates blocks of paths (all with the same steps and dimension).
+    pub(crate) fn concat(blocks: Vec<Trajectories>) -> Trajectories {
+        let steps = blocks[0].steps;
+        let n = blocks[0].state_dim;
+        let paths = blocks.iter().map(|b| b.paths).sum();
+        let mut out = Trajectories::zeros(steps, paths, n);
+        for t in 0..steps {
+            let mut offset = 0;
+            for b in &blocks {
+                let s = b.states(t);
+                out.states_mut(t)[offset..offset + s.len()].copy_from_slice(s);
+                offset += s.len();
+            }
+        }
+        out
+    }
+}
+
+/// A sum over time of `s(t, x_t, x_{t+1})`, smoothed: the smoothers call
+/// [`add`](Self::add) for every time step of every trajectory with the trajectory's
+/// weight, so the accumulated value estimates `E[sum_t s(t, x_t, x_{t+1}) | y_{0:T-1}]`.
+///
+/// `next` is `None` at the last step `t = T - 1`; terms that need only `x_t` (output
+/// equations) use every step, transition terms skip the last one.
+///
+/// Any closure `FnMut(usize, &[f64], Option<&[f64]>, f64)` is a functional.
+pub trait AdditiveFunctional {
+    /// Adds `weight * s(t, x, next)`.
+    fn add(&mut self, t: usize, x: &[f64], next: Option<&[f64]>, weight: f64);
+}
+
+impl<F: FnMut(usize, &[f64], Option<&[f64]>, f64)> AdditiveFunctional for F {
+    fn add(&mut self, t: usize, x: &[f64], next: Option<&[f64]>, weight: f64) {
+        self(t, x, next, weight)
+    }
+}

@@ -23,12 +23,22 @@ fn main() {
     let sim = model.simulate(1000, 3);
     let data = Series::new(&sim.outputs, 1).unwrap();
     let filter = |m: usize, history: bool| {
-        ParticleFilter::new(FilterOptions { particles: m, store_history: history, ..Default::default() }).unwrap()
+        ParticleFilter::new(FilterOptions {
+            particles: m,
+            store_history: history,
+            ..Default::default()
+        })
+        .unwrap()
     };
     if what == "pf" || what == "all" {
         for m in [1000usize, 10000] {
             let mut pf = filter(m, false);
-            let ms = median(|r| { pf.run(&model, &data, r).unwrap(); }, 15);
+            let ms = median(
+                |r| {
+                    pf.run(&model, &data, r).unwrap();
+                },
+                15,
+            );
             println!("pf M={m}: {ms:.3} ms");
         }
     }
@@ -36,19 +46,45 @@ fn main() {
         let mut pf = filter(50, true);
         pf.run(&model, &data, 1).unwrap();
         let h = pf.history().unwrap();
-        let ms = median(|r| { Tanizaki::default().trajectories(&model, h, &data, r).unwrap(); }, 41);
+        let ms = median(
+            |r| {
+                Tanizaki::default()
+                    .trajectories(&model, h, &data, r)
+                    .unwrap();
+            },
+            41,
+        );
         println!("tanizaki M=50: {ms:.3} ms");
     }
     let mut pf = filter(1000, true);
     pf.run(&model, &data, 1).unwrap();
     let h = pf.history().unwrap();
     if what == "ffbsi" || what == "all" {
-        let ms = median(|r| { Ffbsi { paths: 100, parallel: false }.trajectories(&model, h, &data, r).unwrap(); }, 5);
+        let ms = median(
+            |r| {
+                Ffbsi {
+                    paths: 100,
+                    parallel: false,
+                }
+                .trajectories(&model, h, &data, r)
+                .unwrap();
+            },
+            5,
+        );
         println!("ffbsi 100 paths M=1000: {ms:.3} ms");
     }
     if what == "reject" || what == "all" {
-        let smoother = FfbsiReject { paths: 100, max_trials: None, parallel: false };
-        let ms = median(|r| { smoother.trajectories(&model, h, &data, r).unwrap(); }, 11);
+        let smoother = FfbsiReject {
+            paths: 100,
+            max_trials: None,
+            parallel: false,
+        };
+        let ms = median(
+            |r| {
+                smoother.trajectories(&model, h, &data, r).unwrap();
+            },
+            11,
+        );
         let stats = smoother.trajectories(&model, h, &data, 0).unwrap().1;
         println!("ffbsi-reject 100 paths M=1000: {ms:.3} ms {stats:?}");
     }

@@ -25,8 +25,8 @@
 pub use sysid_em as em;
 pub use sysid_kalman as kalman;
 pub use sysid_linalg as linalg;
-pub use sysid_smc as smc;
 pub use sysid_models as models;
+pub use sysid_smc as smc;
 pub use sysid_subspace as subspace;
 
 /// The names most programs need.

@@ -102,11 +102,16 @@ impl Nlbench {
         }
         for (name, v) in [("q", p.q), ("r", p.r)] {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(format!("nlbench variance {name} = {v} must be positive and finite"));
+                return Err(format!(
+                    "nlbench variance {name} = {v} must be positive and finite"
+                ));
             }
         }
         if !(p.p1 >= 0.0 && p.p1.is_finite()) {
-            return Err(format!("nlbench variance p1 = {} must be >= 0 and finite", p.p1));
+            return Err(format!(
+                "nlbench variance p1 = {} must be >= 0 and finite",
+                p.p1
+            ));
         }
         Ok(Nlbench {
             params,
@@ -187,6 +192,7 @@ impl TransitionSampler for Nlbench {
         next[0] = self.mean(x[0], self.forcing(t)) + self.sd_q * z;
     }
 
+    #[inline(always)]
     fn sample_transitions<R: Rng + ?Sized>(
         &self,
         t: usize,
@@ -214,6 +220,7 @@ impl ObservationDensity for Nlbench {
         self.log_norm_r - self.half_inv_r * e * e
     }
 
+    #[inline(always)]
     fn log_observations(&self, _t: usize, _u: &[f64], y: &[f64], states: &[f64], out: &mut [f64]) {
         for (lg, &x) in out.iter_mut().zip(states) {
             let e = y[0] - self.params.d * x * x;

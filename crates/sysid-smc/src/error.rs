@@ -56,7 +56,9 @@ pub enum SmcError {
         value: f64,
     },
     /// A backward draw found every particle unable to reach the next smoothed state.
-    #[error("backward smoothing at time {t}: no filter particle can reach the next state of path {path}")]
+    #[error(
+        "backward smoothing at time {t}: no filter particle can reach the next state of path {path}"
+    )]
     DegenerateBackward {
         /// Time index (0-based).
         t: usize,

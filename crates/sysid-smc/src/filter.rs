@@ -59,6 +59,7 @@ use rayon::prelude::*;
 
 use crate::model::FilterModel;
 use crate::resample::{ResampleScratch, Resampling};
+use crate::simd::Kernel;
 use crate::streams::{Rng, stream};
 use crate::weights::{effective_sample_size, normalise_log_weights};
 use crate::{History, Series, SmcError};
@@ -193,6 +194,21 @@ impl ParticleFilter {
         data: &Series,
         seed: u64,
     ) -> Result<FilterSummary, SmcError> {
+        crate::simd::dispatch(RunKernel {
+            filter: self,
+            model,
+            data,
+            seed,
+        })
+    }
+
+    #[inline(always)]
+    fn run_kernel<M: FilterModel + Sync>(
+        &mut self,
+        model: &M,
+        data: &Series,
+        seed: u64,
+    ) -> Result<FilterSummary, SmcError> {
         let n = model.state_dim();
         let m = self.options.particles;
         let steps = data.steps();
@@ -209,7 +225,8 @@ impl ParticleFilter {
             self.record(t, n);
             if t + 1 < steps {
                 let ess = *self.ess.last().expect("recorded");
-                if self.options.ess_threshold >= 1.0 || ess < self.options.ess_threshold * m as f64 {
+                if self.options.ess_threshold >= 1.0 || ess < self.options.ess_threshold * m as f64
+                {
                     self.options.resampling.resample(
                         &self.weights,
                         &mut resample_rng,
@@ -227,7 +244,10 @@ impl ParticleFilter {
                 std::mem::swap(&mut self.states, &mut self.previous);
             }
         }
-        Ok(FilterSummary { loglik, resampled_steps })
+        Ok(FilterSummary {
+            loglik,
+            resampled_steps,
+        })
     }
 
     fn prepare(&mut self, n: usize, m: usize, steps: usize, seed: u64) {
@@ -242,7 +262,8 @@ impl ParticleFilter {
         self.ancestors.extend(0..m);
         let chunks = m.div_ceil(CHUNK);
         self.rngs.clear();
-        self.rngs.extend((0..chunks).map(|c| stream(seed, c as u64 + 1)));
+        self.rngs
+            .extend((0..chunks).map(|c| stream(seed, c as u64 + 1)));
         self.means.clear();
         self.means.reserve(steps * n);
         self.ess.clear();
@@ -253,6 +274,7 @@ impl ParticleFilter {
         }
     }
 
+    #[inline(always)]
     /// Draws `x_t` (from `mu` at `t = 0`, else from `f` given the resampled `x_{t-1}`)
     /// and evaluates `log g(y_t | x_t)`, chunk by chunk.
     fn propagate_and_weigh<M: FilterModel + Sync>(&mut self, model: &M, data: &Series, t: usize) {
@@ -261,17 +283,9 @@ impl ParticleFilter {
         let previous = &self.previous;
         let ancestors = &self.ancestors;
         let work = |chunk: usize, states: &mut [f64], log_obs: &mut [f64], rng: &mut Rng| {
-            if t == 0 {
-                model.sample_initials(states, rng);
-            } else {
-                let parents = &ancestors[chunk * CHUNK..chunk * CHUNK + log_obs.len()];
-                model.sample_transitions(t - 1, data.input(t - 1), previous, parents, states, rng);
-            }
-            if missing {
-                log_obs.fill(0.0);
-            } else {
-                model.log_observations(t, data.input(t), data.output(t), states, log_obs);
-            }
+            fill_chunk(
+                model, data, t, missing, previous, ancestors, chunk, states, log_obs, rng,
+            )
         };
         if self.options.parallel && self.rngs.len() > 1 {
             self.states
@@ -287,11 +301,14 @@ impl ParticleFilter {
                 .zip(self.log_obs.chunks_mut(CHUNK))
                 .zip(self.rngs.iter_mut());
             for (c, ((states, log_obs), rng)) in chunks.enumerate() {
-                work(c, states, log_obs, rng);
+                fill_chunk(
+                    model, data, t, missing, previous, ancestors, c, states, log_obs, rng,
+                );
             }
         }
     }
 
+    #[inline(always)]
     /// Adds the observation log-densities to the carried log-weights, normalises, and
     /// returns the log-likelihood increment.
     fn reweight(&mut self, t: usize, missing: bool) -> Result<f64, SmcError> {
@@ -302,9 +319,22 @@ impl ParticleFilter {
             }
             return Ok(0.0);
         }
-        if let Some((particle, &value)) =
-            self.log_obs.iter().enumerate().find(|(_, v)| v.is_nan() || **v == f64::INFINITY)
-        {
+        for (l, &lg) in self.log_weights.iter_mut().zip(&self.log_obs) {
+            *l += lg;
+        }
+        let increment = normalise_log_weights(&self.log_weights, &mut self.weights)
+            .unwrap_or(f64::NEG_INFINITY);
+        if !increment.is_finite() {
+            if increment == f64::NEG_INFINITY && !self.log_obs.iter().any(|v| v.is_nan()) {
+                return Err(SmcError::DegenerateWeights { t });
+            }
+            // A NaN or +inf observation log-density (found only on this slow path).
+            let (particle, &value) = self
+                .log_obs
+                .iter()
+                .enumerate()
+                .find(|(_, v)| v.is_nan() || **v == f64::INFINITY)
+                .unwrap_or((0, &increment));
             return Err(SmcError::InvalidDensity {
                 what: "observation log-density",
                 t,
@@ -312,31 +342,126 @@ impl ParticleFilter {
                 value,
             });
         }
-        for (l, &lg) in self.log_weights.iter_mut().zip(&self.log_obs) {
-            *l += lg;
-        }
-        let increment = normalise_log_weights(&self.log_weights, &mut self.weights)
-            .ok_or(SmcError::DegenerateWeights { t })?;
         for l in self.log_weights.iter_mut() {
             *l -= increment;
         }
         Ok(increment)
     }
 
+    #[inline(always)]
     /// Stores the filtered mean, the ESS and (optionally) the history of step `t`.
     fn record(&mut self, _t: usize, n: usize) {
         let start = self.means.len();
         self.means.resize(start + n, 0.0);
-        let mean = &mut self.means[start..];
-        for (x, &w) in self.states.chunks_exact(n).zip(&self.weights) {
-            for (acc, &xi) in mean.iter_mut().zip(x) {
-                *acc += w * xi;
-            }
-        }
+        weighted_mean(&self.states, &self.weights, &mut self.means[start..]);
         self.ess.push(effective_sample_size(&self.weights));
         if self.has_history {
-            self.history
-                .push(&self.states, &self.weights, &self.log_weights, &self.ancestors);
+            self.history.push(
+                &self.states,
+                &self.weights,
+                &self.log_weights,
+                &self.ancestors,
+            );
         }
     }
 }
+
+/// Draws the particles of one chunk at step `t` and evaluates their observation
+/// log-densities.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn fill_chunk<M: FilterModel>(
+    model: &M,
+    data: &Series,
+    t: usize,
+    missing: bool,
+    previous: &[f64],
+    ancestors: &[usize],
+    chunk: usize,
+    states: &mut [f64],
+    log_obs: &mut [f64],
+    rng: &mut Rng,
+) {
+    if t == 0 {
+        model.sample_initials(states, rng);
+    } else {
+        let parents = &ancestors[chunk * CHUNK..chunk * CHUNK + log_obs.len()];
+        model.sample_transitions(t - 1, data.input(t - 1), previous, parents, states, rng);
+    }
+    if missing {
+        log_obs.fill(0.0);
+    } else {
+        model.log_observations(t, data.input(t), data.output(t), states, log_obs);
+    }
+}
+
+struct RunKernel<'f, 'm, 'd, 's, M> {
+    filter: &'f mut ParticleFilter,
+    model: &'m M,
+    data: &'d Series<'s>,
+    seed: u64,
+}
+
+impl<M: FilterModel + Sync> Kernel for RunKernel<'_, '_, '_, '_, M> {
+    type Output = Result<FilterSummary, SmcError>;
+
+    #[inline(always)]
+    fn run(self) -> Self::Output {
+        self.filter.run_kernel(self.model, self.data, self.seed)
+    }
+}
+
+#[inline(always)]
+/// `out = sum_i w_i x_i` over particle-major `states`, with four interleaved partial
+/// sums per coordinate (a fixed order, so the result is reproducible).
+fn weighted_mean(states: &[f64], weights: &[f64], out: &mut [f64]) {
+    let n = out.len();
+    if n == 1 {
+        let mut acc = [0.0f64; 4];
+        let mut chunks = states.chunks_exact(4).zip(weights.chunks_exact(4));
+        for (x, w) in &mut chunks {
+            for k in 0..4 {
+                acc[k] += w[k] * x[k];
+            }
+        }
+        let done = (weights.len() / 4) * 4;
+        let tail: f64 = states[done..]
+            .iter()
+            .zip(&weights[done..])
+            .map(|(x, w)| x * w)
+            .sum();
+        out[0] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail;
+        return;
+    }
+    let mut partial = [[0.0f64; 4]; MEAN_DIM_LIMIT];
+    if n > MEAN_DIM_LIMIT {
+        out.fill(0.0);
+        for (x, &w) in states.chunks_exact(n).zip(weights) {
+            for (acc, &xi) in out.iter_mut().zip(x) {
+                *acc += w * xi;
+            }
+        }
+        return;
+    }
+    let mut groups = states.chunks_exact(4 * n).zip(weights.chunks_exact(4));
+    for (x, w) in &mut groups {
+        for (lane, (&wl, xl)) in w.iter().zip(x.chunks_exact(n)).enumerate() {
+            for (d, &xi) in xl.iter().enumerate() {
+                partial[d][lane] += wl * xi;
+            }
+        }
+    }
+    let done = (weights.len() / 4) * 4;
+    for (x, &w) in states[done * n..].chunks_exact(n).zip(&weights[done..]) {
+        for (d, &xi) in x.iter().enumerate() {
+            partial[d][0] += w * xi;
+        }
+    }
+    for (d, o) in out.iter_mut().enumerate() {
+        let p = partial[d];
+        *o = (p[0] + p[1]) + (p[2] + p[3]);
+    }
+}
+
+/// State dimensions up to which the filtered mean uses interleaved partial sums.
+const MEAN_DIM_LIMIT: usize = 16;

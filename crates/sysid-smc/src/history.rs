@@ -35,7 +35,13 @@ impl History {
         self.resampled.clear();
     }
 
-    pub(crate) fn push(&mut self, states: &[f64], weights: &[f64], log_weights: &[f64], ancestors: &[usize]) {
+    pub(crate) fn push(
+        &mut self,
+        states: &[f64],
+        weights: &[f64],
+        log_weights: &[f64],
+        ancestors: &[usize],
+    ) {
         self.states.extend_from_slice(states);
         self.weights.extend_from_slice(weights);
         self.log_weights.extend_from_slice(log_weights);

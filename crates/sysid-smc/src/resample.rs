@@ -52,6 +52,7 @@ impl Resampling {
     }
 
     /// Draws ancestors with this scheme. `scratch` is reused between calls.
+    #[inline(always)]
     pub fn resample<R: rand::Rng + ?Sized>(
         self,
         weights: &[f64],
@@ -75,14 +76,21 @@ pub struct ResampleScratch {
     residuals: Vec<f64>,
 }
 
-/// Assigns sorted positions (in units of the total weight) to ancestors by one pass
-/// over the cumulative weights.
+/// Assigns sorted positions (in units of the total weight) to ancestors by one merge of
+/// the positions with the cumulative weights. The merge is branch-free (each step
+/// either advances the particle or emits an ancestor), so its cost does not depend on
+/// how predictable the weights are.
+#[inline]
 fn assign_sorted(weights: &[f64], positions: impl Iterator<Item = f64>, out: &mut [usize]) {
     let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
     let mut i = 0;
     let mut upper = weights[0];
     for (slot, p) in out.iter_mut().zip(positions) {
-        while upper <= p && i < last {
+        loop {
+            let advance = upper <= p && i < last;
+            if !advance {
+                break;
+            }
             i += 1;
             upper += weights[i];
         }
@@ -91,10 +99,36 @@ fn assign_sorted(weights: &[f64], positions: impl Iterator<Item = f64>, out: &mu
 }
 
 /// Systematic resampling with the single uniform `u` in [0, 1): positions `(k + u) / N`.
+///
+/// Computed by counting: `count_i = ceil(N C_i / total - u)` positions lie below the
+/// cumulative weight `C_i`, and the ancestor of position `k` is the number of particles
+/// with `count_i <= k`.
+#[inline(always)]
 pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
+    let n = out.len();
     let total: f64 = weights.iter().sum();
-    let step = total / out.len() as f64;
-    assign_sorted(weights, (0..out.len()).map(|k| (k as f64 + u) * step), out);
+    let scale = n as f64 / total;
+    // out[k] = (largest i with count_i <= k) + 1: mark each count with i + 1 (counts
+    // grow with i, so the last write wins) and take a running maximum. Plain stores,
+    // no data-dependent branches.
+    out.fill(0);
+    let mut cumulative = 0.0;
+    let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
+    for (i, &w) in weights[..last].iter().enumerate() {
+        cumulative += w;
+        // ceil without a libm call: truncate, then add one if something was cut off.
+        let z = cumulative * scale - u;
+        let truncated = z as i64;
+        let count = (truncated + i64::from((truncated as f64) < z)).clamp(0, n as i64) as usize;
+        if count < n {
+            out[count] = i + 1;
+        }
+    }
+    let mut running = 0;
+    for slot in out.iter_mut() {
+        running = running.max(*slot);
+        *slot = running;
+    }
 }
 
 /// Stratified resampling: positions `(k + u_k) / N` with independent uniforms.
@@ -147,7 +181,12 @@ pub fn residual<R: rand::Rng + ?Sized>(
         residual_weights.push(expected - copies as f64);
     }
     if filled < n {
-        multinomial(residual_weights, rng, &mut out[filled..], &mut scratch.spacings);
+        multinomial(
+            residual_weights,
+            rng,
+            &mut out[filled..],
+            &mut scratch.spacings,
+        );
     }
 }
 
@@ -171,8 +210,15 @@ mod tests {
     fn residual_gives_the_floor_copies() {
         let w = [0.5, 0.3, 0.2];
         let mut out = [0usize; 10];
-        residual(&w, &mut stream(2, 0), &mut out, &mut ResampleScratch::default());
-        let counts: Vec<usize> = (0..3).map(|i| out.iter().filter(|&&a| a == i).count()).collect();
+        residual(
+            &w,
+            &mut stream(2, 0),
+            &mut out,
+            &mut ResampleScratch::default(),
+        );
+        let counts: Vec<usize> = (0..3)
+            .map(|i| out.iter().filter(|&&a| a == i).count())
+            .collect();
         assert_eq!(counts, [5, 3, 2]);
     }
 

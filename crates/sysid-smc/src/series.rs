@@ -28,7 +28,7 @@ impl<'a> Series<'a> {
     /// Outputs only. Errors on a length that is not a multiple of `output_dim`, on no
     /// steps at all, and on infinite outputs.
     pub fn new(outputs: &'a [f64], output_dim: usize) -> Result<Self, SmcError> {
-        if output_dim == 0 || outputs.is_empty() || outputs.len() % output_dim != 0 {
+        if output_dim == 0 || outputs.is_empty() || !outputs.len().is_multiple_of(output_dim) {
             return Err(SmcError::DimensionMismatch {
                 what: "outputs",
                 expected: format!("a positive multiple of output_dim = {output_dim}"),

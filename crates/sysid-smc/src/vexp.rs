@@ -16,8 +16,10 @@
 //! About 20 vector instructions per 4 (AVX2) or 8 (AVX-512) values.
 
 const LOG2_E: f64 = std::f64::consts::LOG2_E;
-const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
-const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+/// `ln 2` rounded to 32 significant bits, so that `k * LN2_HI` is exact.
+const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+/// `ln 2 - LN2_HI`.
+const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
 /// 1.5 * 2^52: adding it rounds to an integer held in the low mantissa bits.
 const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
 const MIN_ARG: f64 = -708.0;
@@ -108,8 +110,7 @@ pub fn exp_shifted_sum(v: &mut [f64], shift: f64) -> f64 {
             // SAFETY: the CPU supports AVX-512F, checked just above.
             return unsafe { exp_shifted_sum_avx512(v, shift) };
         }
-        if std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU supports AVX2 and FMA, checked just above.
             return unsafe { exp_shifted_sum_avx2(v, shift) };

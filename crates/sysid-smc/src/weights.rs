@@ -4,7 +4,7 @@ use crate::vexp::exp_shifted_sum;
 
 /// The largest value of a slice (`-inf` for an empty slice or all `-inf`).
 /// NaN entries are ignored; callers check for them separately.
-#[inline]
+#[inline(always)]
 pub fn max_value(values: &[f64]) -> f64 {
     let mut acc = [f64::NEG_INFINITY; 4];
     let mut chunks = values.chunks_exact(4);
@@ -33,6 +33,7 @@ pub fn max_value(values: &[f64]) -> f64 {
 /// assert!((log_sum - 3f64.ln()).abs() < 1e-15);
 /// assert!((w[1] - 2.0 / 3.0).abs() < 1e-15);
 /// ```
+#[inline]
 pub fn normalise_log_weights(log_weights: &[f64], weights: &mut [f64]) -> Option<f64> {
     let max = max_value(log_weights);
     if max == f64::NEG_INFINITY {
@@ -48,6 +49,7 @@ pub fn normalise_log_weights(log_weights: &[f64], weights: &mut [f64]) -> Option
 }
 
 /// Effective sample size `1 / sum W_i^2` of normalised weights.
+#[inline]
 pub fn effective_sample_size(weights: &[f64]) -> f64 {
     let mut acc = [0.0f64; 4];
     let mut chunks = weights.chunks_exact(4);
@@ -65,7 +67,7 @@ pub fn effective_sample_size(weights: &[f64]) -> f64 {
 /// Scans blocks of eight (block sums are independent, so only the block totals form a
 /// dependency chain). A target at or beyond the total (rounding) gives the last index
 /// with positive weight.
-#[inline]
+#[inline(always)]
 pub fn find_cumulative(weights: &[f64], target: f64) -> usize {
     let mut acc = 0.0;
     let mut start = 0;
@@ -98,14 +100,14 @@ fn block_sum(block: &[f64]) -> f64 {
 
 /// The total of non-negative weights, as the sum of the same block sums that
 /// [`find_cumulative`] scans, so that `uniform * total` always falls inside.
-#[inline]
+#[inline(always)]
 pub fn blocked_total(weights: &[f64]) -> f64 {
     weights.chunks(8).map(block_sum).sum()
 }
 
 /// Draws an index with probabilities proportional to the non-negative `weights`, or
 /// `None` when their total is not a positive finite number (NaN weights, all zero).
-#[inline]
+#[inline(always)]
 pub fn draw_from_weights(weights: &[f64], uniform: f64) -> Option<usize> {
     let total = blocked_total(weights);
     (total > 0.0 && total.is_finite()).then(|| find_cumulative(weights, uniform * total))
@@ -115,7 +117,7 @@ pub fn draw_from_weights(weights: &[f64], uniform: f64) -> Option<usize> {
 /// largest entry of each row is 0. Returns the index of a row whose maximum is `-inf`
 /// (degenerate) or `+inf` (invalid). NaN entries survive as NaN and are caught by the
 /// caller after exponentiation.
-#[inline]
+#[inline(always)]
 pub fn shift_rows_by_max(matrix: &mut [f64], row_len: usize) -> Result<(), (usize, DrawFailure)> {
     for (k, row) in matrix.chunks_exact_mut(row_len).enumerate() {
         let max = max_value(row);
@@ -182,11 +184,20 @@ mod tests {
         let mut w = [0.0; 3];
         assert!(normalise_log_weights(&[f64::NEG_INFINITY; 3], &mut w).is_none());
         let mut l = [f64::NEG_INFINITY; 3];
-        assert_eq!(draw_from_log_weights(&mut l, 0.5), Err(DrawFailure::Degenerate));
+        assert_eq!(
+            draw_from_log_weights(&mut l, 0.5),
+            Err(DrawFailure::Degenerate)
+        );
         let mut bad = [0.0, f64::NAN];
-        assert_eq!(draw_from_log_weights(&mut bad, 0.5), Err(DrawFailure::Invalid));
+        assert_eq!(
+            draw_from_log_weights(&mut bad, 0.5),
+            Err(DrawFailure::Invalid)
+        );
         let mut inf = [0.0, f64::INFINITY];
-        assert_eq!(draw_from_log_weights(&mut inf, 0.5), Err(DrawFailure::Invalid));
+        assert_eq!(
+            draw_from_log_weights(&mut inf, 0.5),
+            Err(DrawFailure::Invalid)
+        );
     }
 
     #[test]

@@ -123,9 +123,16 @@ where
         let n = history.state_dim();
         let mut out = Trajectories::zeros(history.steps(), size, n);
         let mut step = make_step();
-        run_block(history, paths, block, seed, &mut step, &mut |t, states, _| {
-            out.states_mut(t).copy_from_slice(states);
-        })?;
+        run_block(
+            history,
+            paths,
+            block,
+            seed,
+            &mut step,
+            &mut |t, states, _| {
+                out.states_mut(t).copy_from_slice(states);
+            },
+        )?;
         Ok((out, step.stats()))
     };
     let results: Vec<_> = if parallel && blocks > 1 {
@@ -160,11 +167,18 @@ where
     let n = history.state_dim();
     let weight = 1.0 / paths as f64;
     for block in 0..paths.div_ceil(PATH_BLOCK) {
-        run_block(history, paths, block, seed, &mut step, &mut |t, states, next| {
-            for (k, x) in states.chunks_exact(n).enumerate() {
-                functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
-            }
-        })?;
+        run_block(
+            history,
+            paths,
+            block,
+            seed,
+            &mut step,
+            &mut |t, states, next| {
+                for (k, x) in states.chunks_exact(n).enumerate() {
+                    functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
+                }
+            },
+        )?;
     }
     Ok(step.stats())
 }

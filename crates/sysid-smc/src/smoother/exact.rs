@@ -3,9 +3,9 @@
 use rand::RngExt;
 
 use super::SmootherStats;
-use crate::simd::Kernel;
 use super::backward::{BackwardStep, backward_error};
 use crate::model::TransitionDensity;
+use crate::simd::Kernel;
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{DrawFailure, draw_from_weights, shift_rows_by_max};
@@ -85,7 +85,8 @@ impl<M: TransitionDensity> Kernel for StepKernel<'_, '_, '_, M> {
 
     #[inline(always)]
     fn run(self) -> Self::Output {
-        self.step.step_kernel(self.t, self.next_states, self.out, self.rng)
+        self.step
+            .step_kernel(self.t, self.next_states, self.out, self.rng)
     }
 }
 
@@ -135,10 +136,13 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
         for (k, (row, slot)) in self.matrix.chunks_exact(m).zip(out.iter_mut()).enumerate() {
             let i = draw_from_weights(row, rng.random())
                 .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
-            *slot = if resampled { self.history.ancestors(t + 1)[i] } else { i };
+            *slot = if resampled {
+                self.history.ancestors(t + 1)[i]
+            } else {
+                i
+            };
         }
         self.stats.density_evaluations += (out.len() * m) as u64;
         Ok(())
     }
-
 }

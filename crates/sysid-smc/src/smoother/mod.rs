@@ -111,7 +111,9 @@ impl<M: StateSpace> Smoother<M> for Genealogy {
         seed: u64,
     ) -> Result<(Trajectories, SmootherStats), SmcError> {
         check_history(history, data)?;
-        backward::trajectories(history, self.paths, seed, false, || GenealogyStep { history })
+        backward::trajectories(history, self.paths, seed, false, || GenealogyStep {
+            history,
+        })
     }
 
     fn additive<F: AdditiveFunctional + ?Sized>(
@@ -123,7 +125,13 @@ impl<M: StateSpace> Smoother<M> for Genealogy {
         functional: &mut F,
     ) -> Result<SmootherStats, SmcError> {
         check_history(history, data)?;
-        backward::additive(history, self.paths, seed, GenealogyStep { history }, functional)
+        backward::additive(
+            history,
+            self.paths,
+            seed,
+            GenealogyStep { history },
+            functional,
+        )
     }
 }
 

@@ -50,13 +50,23 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
         let states = self.history.states(t);
         let cumulative = &self.cumulative[t * m..(t + 1) * m];
         let total = cumulative[m - 1];
-        let last_positive = self.history.weights(t).iter().rposition(|&w| w > 0.0).unwrap_or(0);
+        let last_positive = self
+            .history
+            .weights(t)
+            .iter()
+            .rposition(|&w| w > 0.0)
+            .unwrap_or(0);
         let log_bound = self.model.log_transition_bound(t, u);
-        'paths: for (k, (next, slot)) in next_states.chunks_exact(n).zip(out.iter_mut()).enumerate() {
+        'paths: for (k, (next, slot)) in next_states.chunks_exact(n).zip(out.iter_mut()).enumerate()
+        {
             for _ in 0..self.max_trials {
                 let target = rng.random::<f64>() * total;
-                let i = cumulative.partition_point(|&c| c <= target).min(last_positive);
-                let log_f = self.model.log_transition(t, &states[i * n..(i + 1) * n], u, next);
+                let i = cumulative
+                    .partition_point(|&c| c <= target)
+                    .min(last_positive);
+                let log_f = self
+                    .model
+                    .log_transition(t, &states[i * n..(i + 1) * n], u, next);
                 self.stats.trials += 1;
                 self.stats.density_evaluations += 1;
                 if log_f > log_bound {

@@ -1,0 +1,296 @@
+//! Particle methods against the exact Kalman answer on `lgss` (ALGORITHMS.md 2.1-2.3):
+//! unbiasedness of the likelihood estimate, smoothed means against RTS, rejection FFBSi
+//! against O(M^2) FFBSi, and bit-identical results for any thread count.
+
+use sysid::kalman::{KalmanWorkspace, Record};
+use sysid::models::{LinearGaussianSmc, Nlbench, System, lgss};
+use sysid::smc::{
+    Ffbsi, FfbsiReject, FilterOptions, Genealogy, ParticleFilter, Resampling, Series, Smoother,
+    Tanizaki,
+};
+
+fn lgss_data(steps: usize, seed: u64) -> (Record, Vec<f64>) {
+    let sim = System::Lgss.simulate(steps, seed).unwrap();
+    let y = sim.record.y.as_slice().to_vec();
+    (sim.record, y)
+}
+
+/// Mean and standard error of a sample.
+fn mean_se(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+#[test]
+fn likelihood_estimate_is_unbiased_for_every_scheme_and_threshold() {
+    let (record, y) = lgss_data(100, 11);
+    let exact = KalmanWorkspace::new().loglik(&lgss(), &record).unwrap();
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let data = Series::new(&y, 1).unwrap();
+    for scheme in Resampling::ALL {
+        for threshold in [1.0, 0.5] {
+            let mut pf = ParticleFilter::new(FilterOptions {
+                particles: 100,
+                resampling: scheme,
+                ess_threshold: threshold,
+                ..Default::default()
+            })
+            .unwrap();
+            let ratios: Vec<f64> = (0..2000)
+                .map(|run| (pf.run(&model, &data, run).unwrap().loglik - exact).exp())
+                .collect();
+            let (mean, se) = mean_se(&ratios);
+            eprintln!(
+                "{} ess {threshold}: mean exp(l^ - l) = {mean:.4} (se {se:.4})",
+                scheme.name()
+            );
+            assert!(
+                (mean - 1.0).abs() < 3.0 * se,
+                "{} ess {threshold}: mean ratio {mean} (se {se})",
+                scheme.name()
+            );
+            assert!(
+                se < 0.1,
+                "{}: the test has no power (se {se})",
+                scheme.name()
+            );
+        }
+    }
+}
+
+#[test]
+fn adaptive_resampling_skips_some_steps() {
+    // With a threshold of 0.5 the filter must actually skip resampling on lgss.
+    let (_, y) = lgss_data(100, 11);
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let data = Series::new(&y, 1).unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 100,
+        ess_threshold: 0.5,
+        ..Default::default()
+    })
+    .unwrap();
+    let run = pf.run(&model, &data, 3).unwrap();
+    assert!(
+        run.resampled_steps > 0 && run.resampled_steps < 99,
+        "{run:?}"
+    );
+}
+
+/// Smoothed means of `replications` independent filter+smoother runs, per step.
+fn replicate_means<S: Smoother<LinearGaussianSmc>>(
+    smoother: &S,
+    particles: usize,
+    y: &[f64],
+    replications: u64,
+) -> Vec<Vec<f64>> {
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let data = Series::new(y, 1).unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles,
+        store_history: true,
+        ..Default::default()
+    })
+    .unwrap();
+    (0..replications)
+        .map(|r| {
+            pf.run(&model, &data, 1000 + r).unwrap();
+            let (paths, _) = smoother
+                .trajectories(&model, pf.history().unwrap(), &data, 2000 + r)
+                .unwrap();
+            paths.means()
+        })
+        .collect()
+}
+
+fn assert_close_to_rts(name: &str, runs: &[Vec<f64>], rts: &[f64]) {
+    let mut worst: f64 = 0.0;
+    for (t, &exact) in rts.iter().enumerate() {
+        let values: Vec<f64> = runs.iter().map(|r| r[t]).collect();
+        let (mean, se) = mean_se(&values);
+        let z = (mean - exact).abs() / se;
+        worst = worst.max(z);
+        if std::env::var("SMC_DEBUG").is_ok() && z > 3.0 {
+            eprintln!("{name}: t = {t}, mean {mean}, RTS {exact}, z {z:.2}");
+            continue;
+        }
+        assert!(
+            z < 4.0,
+            "{name}: t = {t}, mean {mean}, RTS {exact}, {z:.2} standard errors"
+        );
+    }
+    assert!(worst > 0.5, "{name}: suspiciously exact ({worst})");
+}
+
+#[test]
+fn smoothed_means_match_rts_within_four_standard_errors() {
+    // Particle smoothers are consistent with an O(1/M) bias; M = 500 keeps it below
+    // the Monte Carlo standard error of 24 replications on a typical record.
+    let (record, y) = lgss_data(100, 11);
+    let mut ws = KalmanWorkspace::new();
+    let rts: Vec<f64> = {
+        let out = ws.smooth(&lgss(), &record).unwrap();
+        (0..100).map(|t| out.mean(t)[0]).collect()
+    };
+    let tanizaki = replicate_means(&Tanizaki::default(), 500, &y, 24);
+    assert_close_to_rts("tanizaki", &tanizaki, &rts);
+    let ffbsi = replicate_means(
+        &Ffbsi {
+            paths: 500,
+            parallel: false,
+        },
+        500,
+        &y,
+        24,
+    );
+    assert_close_to_rts("ffbsi", &ffbsi, &rts);
+    let reject = FfbsiReject {
+        paths: 500,
+        max_trials: None,
+        parallel: false,
+    };
+    let rejection = replicate_means(&reject, 500, &y, 24);
+    assert_close_to_rts("ffbsi-reject", &rejection, &rts);
+}
+
+/// Two-sample Kolmogorov-Smirnov statistic.
+fn ks_statistic(a: &mut [f64], b: &mut [f64]) -> f64 {
+    a.sort_by(f64::total_cmp);
+    b.sort_by(f64::total_cmp);
+    let (mut i, mut j, mut d) = (0, 0, 0.0f64);
+    while i < a.len() && j < b.len() {
+        let x = a[i].min(b[j]);
+        while i < a.len() && a[i] <= x {
+            i += 1;
+        }
+        while j < b.len() && b[j] <= x {
+            j += 1;
+        }
+        d = d.max((i as f64 / a.len() as f64 - j as f64 / b.len() as f64).abs());
+    }
+    d
+}
+
+#[test]
+fn rejection_ffbsi_and_exact_ffbsi_draw_the_same_marginals() {
+    let (_, y) = lgss_data(100, 31);
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let data = Series::new(&y, 1).unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 300,
+        store_history: true,
+        ..Default::default()
+    })
+    .unwrap();
+    pf.run(&model, &data, 5).unwrap();
+    let history = pf.history().unwrap();
+    let k = 2000;
+    let (exact, _) = Ffbsi {
+        paths: k,
+        parallel: false,
+    }
+    .trajectories(&model, history, &data, 1)
+    .unwrap();
+    let (rejection, stats) = FfbsiReject {
+        paths: k,
+        max_trials: None,
+        parallel: false,
+    }
+    .trajectories(&model, history, &data, 2)
+    .unwrap();
+    assert!(stats.trials > 0);
+    // Given the filter, both draw i.i.d. paths from the same law: KS at level 0.001
+    // (critical value 1.95 sqrt(2 / k)) at five time points.
+    let critical = 1.95 * (2.0 / k as f64).sqrt();
+    for t in [0, 25, 50, 75, 99] {
+        let mut a = exact.states(t).to_vec();
+        let mut b = rejection.states(t).to_vec();
+        let d = ks_statistic(&mut a, &mut b);
+        assert!(d < critical, "t = {t}: KS {d} >= {critical}");
+    }
+}
+
+#[test]
+fn genealogy_paths_are_filter_ancestries() {
+    let (_, y) = lgss_data(50, 41);
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let data = Series::new(&y, 1).unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 100,
+        store_history: true,
+        ..Default::default()
+    })
+    .unwrap();
+    pf.run(&model, &data, 9).unwrap();
+    let h = pf.history().unwrap();
+    let (paths, _) = Genealogy { paths: 10 }
+        .trajectories(&model, h, &data, 3)
+        .unwrap();
+    for k in 0..10 {
+        // Each state at t must be the ancestor of the state at t + 1.
+        for t in 0..49 {
+            let next = paths.state(t + 1, k)[0];
+            let i = h.states(t + 1).iter().position(|&x| x == next).unwrap();
+            let parent = h.ancestors(t + 1)[i];
+            assert_eq!(paths.state(t, k)[0], h.states(t)[parent]);
+        }
+    }
+}
+
+#[test]
+fn same_seed_gives_identical_bits_with_one_and_four_threads() {
+    let model = Nlbench::truth();
+    let sim = model.simulate(200, 4);
+    let data = Series::new(&sim.outputs, 1).unwrap();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut pf = ParticleFilter::new(FilterOptions {
+                particles: 5000,
+                store_history: true,
+                parallel: true,
+                ..Default::default()
+            })
+            .unwrap();
+            let loglik = pf.run(&model, &data, 77).unwrap().loglik;
+            let history = pf.history().unwrap();
+            let (paths, _) = Ffbsi {
+                paths: 100,
+                parallel: true,
+            }
+            .trajectories(&model, history, &data, 78)
+            .unwrap();
+            let (rejected, _) = FfbsiReject {
+                paths: 100,
+                max_trials: None,
+                parallel: true,
+            }
+            .trajectories(&model, history, &data, 79)
+            .unwrap();
+            (loglik.to_bits(), pf.means().to_vec(), paths, rejected)
+        })
+    };
+    let one = run(1);
+    let four = run(4);
+    assert_eq!(one.0, four.0);
+    assert!(
+        one.1
+            .iter()
+            .zip(&four.1)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+    assert_eq!(one.2, four.2);
+    assert_eq!(one.3, four.3);
+    // And the parallel filter equals the sequential one.
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 5000,
+        ..Default::default()
+    })
+    .unwrap();
+    assert_eq!(pf.run(&model, &data, 77).unwrap().loglik.to_bits(), one.0);
+}

@@ -4,11 +4,13 @@
 //!
 //! ```text
 //! cargo run --release -p sysid-bench -- kalman [--reps 21]
+//! cargo run --release -p sysid-bench -- smc [--reps 21]
 //! ```
 
 mod em;
 mod kalman;
 mod lti2x2;
+mod smc;
 
 use clap::{Parser, Subcommand};
 
@@ -42,6 +44,12 @@ enum Runner {
         #[arg(long, default_value_t = 21)]
         reps: usize,
     },
+    /// Particle filter and smoothers on nlbench (ms; targets of the SMC issue).
+    Smc {
+        /// Repetitions; medians are reported.
+        #[arg(long, default_value_t = 21)]
+        reps: usize,
+    },
     /// Seed-004 reproduction: EM from the paper's initial model and from N4SID on
     /// lti2x2 data sets.
     Lti2x2 {
@@ -68,6 +76,7 @@ fn main() {
     match cli.runner {
         Runner::Kalman { reps, system } => kalman::run(reps.max(1), system.as_deref()),
         Runner::Em { reps } => em::run(reps.max(1)),
+        Runner::Smc { reps } => smc::run(reps.max(1)),
         Runner::Lti2x2 {
             datasets,
             steps,

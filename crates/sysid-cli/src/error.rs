@@ -71,6 +71,11 @@ pub enum CliError {
     Subspace(#[from] sysid::subspace::SubspaceError),
     #[error("{0}")]
     Em(#[from] sysid::em::linear::LinearEmError),
+    #[error("{context}: {source}")]
+    Smc {
+        context: String,
+        source: sysid::smc::SmcError,
+    },
     #[error("the data have {found} {what} columns but the model has {expected}")]
     ColumnCount {
         what: &'static str,

@@ -4,6 +4,9 @@
 //! sysid simulate lti2x2 --steps 200 --seed 1 --out data.csv --model-out true.json
 //! sysid loglik --model true.json --data data.csv
 //! sysid smooth --model true.json --data data.csv --out smoothed.csv
+//! sysid simulate nlbench --steps 1000 --seed 1 --out nl.csv
+//! sysid pf --system nlbench --data nl.csv --particles 1000 --out filtered.csv
+//! sysid psmooth --system nlbench --data nl.csv --method ffbsi-reject --paths 100 --out smoothed.csv
 //! ```
 //! Errors are one line on stderr and a non-zero exit code; existing files are never
 //! replaced without `--force`.
@@ -60,6 +63,11 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Bootstrap particle filter: the log-likelihood estimate and filtered means.
+    Pf(commands::particle::ParticleArgs),
+    /// Particle smoother (Tanizaki, FFBSi, rejection FFBSi, genealogy): smoothed means
+    /// and standard deviations.
+    Psmooth(commands::particle::SmoothArgs),
     /// Smooth the states (RTS) and write their means and standard deviations as CSV.
     Smooth {
         /// Model file (JSON, see docs/model-format.md).
@@ -95,6 +103,8 @@ fn main() -> ExitCode {
         Command::Simulate(options) => commands::simulate::run(&options),
         Command::N4sid(options) => commands::n4sid::run(&options),
         Command::Fit(options) => commands::fit::run(&options),
+        Command::Pf(options) => commands::particle::run_filter(&options),
+        Command::Psmooth(options) => commands::particle::run_smoother(&options),
         Command::Loglik { model, data, json } => commands::loglik::run(&model, &data, json),
         Command::Smooth {
             model,

@@ -112,6 +112,16 @@ impl LinearGaussianSmc {
         })
     }
 
+    /// Number of outputs p.
+    pub fn output_dim(&self) -> usize {
+        self.p
+    }
+
+    /// Number of inputs m.
+    pub fn input_dim(&self) -> usize {
+        self.m
+    }
+
     /// `out = M x` for a row-major `rows x cols` matrix, accumulated onto `out`.
     #[inline]
     fn add_product(m: &[f64], cols: usize, x: &[f64], out: &mut [f64]) {

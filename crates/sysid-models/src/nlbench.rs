@@ -236,6 +236,18 @@ impl TransitionDensity for Nlbench {
         self.log_norm_q - self.half_inv_q * e * e
     }
 
+    fn log_transition_at<'a>(
+        &'a self,
+        t: usize,
+        _u: &'a [f64],
+    ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
+        let forcing = self.forcing(t);
+        move |x, next| {
+            let e = next[0] - self.mean(x[0], forcing);
+            self.log_norm_q - self.half_inv_q * e * e
+        }
+    }
+
     #[inline]
     fn log_transition_matrix(
         &self,

@@ -88,6 +88,17 @@ pub trait TransitionDensity: StateSpace {
     /// The transition log-density of `next` given `x`.
     fn log_transition(&self, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64;
 
+    /// The transition log-density at step `t` as a function of `(x, next)`, for many
+    /// evaluations at the same step (rejection sampling). Models override it to do
+    /// the per-step work (time-varying terms, input terms) once.
+    fn log_transition_at<'a>(
+        &'a self,
+        t: usize,
+        u: &'a [f64],
+    ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
+        move |x, next| self.log_transition(t, x, u, next)
+    }
+
     /// All pairs at once: `out[j * m + i] = log f(to_j | from_i)` for the `m` particles
     /// of `from` and the `k` particles of `to` (both particle-major, stride
     /// `state_dim`). `scratch` is the caller's reusable buffer, for example for the

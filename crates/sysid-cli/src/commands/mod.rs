@@ -4,6 +4,7 @@ pub mod fit;
 pub mod fix;
 pub mod loglik;
 pub mod n4sid;
+pub mod particle;
 pub mod simulate;
 pub mod smooth;
 
@@ -28,9 +29,14 @@ impl DataArgs {
 
 /// Checks that a data file has as many input and output columns as the model.
 pub fn check_columns(model: &LinearGaussianModel, file: &DataFile) -> Result<(), CliError> {
+    check_column_counts(file, model.m(), model.p())
+}
+
+/// Checks that a data file has `inputs` input and `outputs` output columns.
+pub fn check_column_counts(file: &DataFile, inputs: usize, outputs: usize) -> Result<(), CliError> {
     for (what, found, expected) in [
-        ("input", file.input_names.len(), model.m()),
-        ("output", file.output_names.len(), model.p()),
+        ("input", file.input_names.len(), inputs),
+        ("output", file.output_names.len(), outputs),
     ] {
         if found != expected {
             return Err(CliError::ColumnCount {

@@ -8,7 +8,7 @@ use sysid::models::System;
 /// Options of `sysid simulate`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// System name: lgss or lti2x2.
+    /// System name: lgss, lti2x2 or nlbench.
     pub system: String,
     /// Number of time steps.
     #[arg(long, default_value_t = 1000)]
@@ -34,9 +34,12 @@ pub struct Options {
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    if o.system == "nlbench" {
+        return run_nlbench(o);
+    }
     let system = System::from_name(&o.system).ok_or_else(|| CliError::UnknownSystem {
         name: o.system.clone(),
-        known: System::ALL.map(System::name).join(", "),
+        known: System::ALL.map(System::name).join(", ") + ", nlbench",
     })?;
     let sim = system
         .simulate(o.steps, o.seed)
@@ -83,6 +86,45 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             "wrote {} steps of {} to {}",
             o.steps,
             system.name(),
+            o.out.display()
+        ));
+    }
+    Ok(())
+}
+
+/// The nonlinear benchmark (no inputs, no model file: it is not linear Gaussian).
+fn run_nlbench(o: &Options) -> Result<(), CliError> {
+    if o.model_out.is_some() {
+        return Err(CliError::BadOption {
+            option: "--model-out",
+            message: "nlbench is not a linear Gaussian model and has no model file".into(),
+        });
+    }
+    let sim = sysid::models::Nlbench::truth().simulate(o.steps, o.seed);
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    writeln!(w, "{}", if o.states { "t,y1,x1" } else { "t,y1" }).map_err(io)?;
+    for (t, (&y, &x)) in sim.outputs.iter().zip(&sim.states).enumerate() {
+        if o.states {
+            writeln!(w, "{},{},{}", t + 1, fmt(y), fmt(x)).map_err(io)?;
+        } else {
+            writeln!(w, "{},{}", t + 1, fmt(y)).map_err(io)?;
+        }
+    }
+    w.flush().map_err(io)?;
+    if o.json {
+        let summary = serde_json::json!({
+            "command": "simulate", "system": "nlbench", "steps": o.steps, "seed": o.seed,
+            "out": o.out,
+        });
+        crate::say(&summary.to_string());
+    } else {
+        crate::say(&format!(
+            "wrote {} steps of nlbench to {}",
+            o.steps,
             o.out.display()
         ));
     }

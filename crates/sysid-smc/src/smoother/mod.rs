@@ -40,7 +40,7 @@ use crate::model::{StateSpace, TransitionBound, TransitionDensity};
 use crate::{History, Series, SmcError};
 use exact::{Cloud, ExactStep};
 use genealogy::GenealogyStep;
-use reject::{RejectStep, cumulative_weights};
+use reject::{ProposalTables, RejectStep};
 
 /// Work done by a smoother.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -228,13 +228,13 @@ impl FfbsiReject {
         model: &'a M,
         history: &'a History,
         data: &'a Series<'a>,
-        cumulative: &'a [f64],
+        tables: &'a ProposalTables,
     ) -> RejectStep<'a, M> {
         RejectStep {
             model,
             history,
             data,
-            cumulative,
+            tables,
             max_trials: self.max_trials.unwrap_or(history.particles()),
             row: Vec::new(),
             scratch: Vec::new(),
@@ -252,9 +252,9 @@ impl<M: TransitionBound + Sync> Smoother<M> for FfbsiReject {
         seed: u64,
     ) -> Result<(Trajectories, SmootherStats), SmcError> {
         check_history(history, data)?;
-        let cumulative = cumulative_weights(history);
+        let tables = ProposalTables::new(history);
         backward::trajectories(history, self.paths, seed, self.parallel, || {
-            self.step(model, history, data, &cumulative)
+            self.step(model, history, data, &tables)
         })
     }
 
@@ -267,8 +267,8 @@ impl<M: TransitionBound + Sync> Smoother<M> for FfbsiReject {
         functional: &mut F,
     ) -> Result<SmootherStats, SmcError> {
         check_history(history, data)?;
-        let cumulative = cumulative_weights(history);
-        let step = self.step(model, history, data, &cumulative);
+        let tables = ProposalTables::new(history);
+        let step = self.step(model, history, data, &tables);
         backward::additive(history, self.paths, seed, step, functional)
     }
 }

@@ -2,10 +2,12 @@
 //! number of trials capped and an exact fallback draw (Dau and Chopin 2023).
 
 use rand::RngExt;
+use rand_distr::{Distribution, Exp1};
 
 use super::SmootherStats;
 use super::backward::{BackwardStep, backward_error};
 use crate::model::TransitionBound;
+use crate::resample::systematic;
 use crate::streams::Rng;
 use crate::weights::draw_from_log_weights;
 use crate::{History, Series, SmcError};
@@ -14,25 +16,64 @@ pub(crate) struct RejectStep<'a, M> {
     pub model: &'a M,
     pub history: &'a History,
     pub data: &'a Series<'a>,
-    /// Cumulative filter weights, T x M.
-    pub cumulative: &'a [f64],
+    pub tables: &'a ProposalTables,
     pub max_trials: usize,
     pub row: Vec<f64>,
     pub scratch: Vec<f64>,
     pub stats: SmootherStats,
 }
 
-/// The cumulative sums of the filter weights at every step (T x M).
-pub(crate) fn cumulative_weights(history: &History) -> Vec<f64> {
-    let mut out = Vec::with_capacity(history.steps() * history.particles());
-    for t in 0..history.steps() {
-        let mut acc = 0.0;
-        out.extend(history.weights(t).iter().map(|w| {
-            acc += w;
-            acc
-        }));
+/// Per-step tables for O(1) expected draws from `Cat(W_t)`: the cumulative weights and
+/// a guide table (Chen and Asau 1974), `guide[j]` = the first particle whose cumulative
+/// weight exceeds `j / M` of the total.
+pub(crate) struct ProposalTables {
+    particles: usize,
+    cumulative: Vec<f64>,
+    guide: Vec<usize>,
+    last_positive: Vec<usize>,
+}
+
+impl ProposalTables {
+    pub fn new(history: &History) -> Self {
+        let (steps, m) = (history.steps(), history.particles());
+        let mut cumulative = Vec::with_capacity(steps * m);
+        let mut guide = vec![0usize; steps * m];
+        let mut last_positive = Vec::with_capacity(steps);
+        for t in 0..steps {
+            let weights = history.weights(t);
+            let mut acc = 0.0;
+            cumulative.extend(weights.iter().map(|w| {
+                acc += w;
+                acc
+            }));
+            systematic(weights, 0.0, &mut guide[t * m..(t + 1) * m]);
+            last_positive.push(weights.iter().rposition(|&w| w > 0.0).unwrap_or(0));
+        }
+        ProposalTables {
+            particles: m,
+            cumulative,
+            guide,
+            last_positive,
+        }
     }
-    out
+
+    /// Draws `i ~ Cat(W_t)` from a uniform in [0, 1).
+    #[inline]
+    fn draw(&self, t: usize, uniform: f64) -> usize {
+        let m = self.particles;
+        let cumulative = &self.cumulative[t * m..(t + 1) * m];
+        let target = uniform * cumulative[m - 1];
+        let j = ((uniform * m as f64) as usize).min(m - 1);
+        let last = self.last_positive[t];
+        let mut i = self.guide[t * m + j].min(last);
+        while i > 0 && cumulative[i - 1] > target {
+            i -= 1;
+        }
+        while i < last && cumulative[i] <= target {
+            i += 1;
+        }
+        i
+    }
 }
 
 impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
@@ -48,35 +89,26 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
         let m = self.history.particles();
         let u = self.data.input(t);
         let states = self.history.states(t);
-        let cumulative = &self.cumulative[t * m..(t + 1) * m];
-        let total = cumulative[m - 1];
-        let last_positive = self
-            .history
-            .weights(t)
-            .iter()
-            .rposition(|&w| w > 0.0)
-            .unwrap_or(0);
         let log_bound = self.model.log_transition_bound(t, u);
+        let log_f = self.model.log_transition_at(t, u);
         'paths: for (k, (next, slot)) in next_states.chunks_exact(n).zip(out.iter_mut()).enumerate()
         {
             for _ in 0..self.max_trials {
-                let target = rng.random::<f64>() * total;
-                let i = cumulative
-                    .partition_point(|&c| c <= target)
-                    .min(last_positive);
-                let log_f = self
-                    .model
-                    .log_transition(t, &states[i * n..(i + 1) * n], u, next);
+                let i = self.tables.draw(t, rng.random());
+                let value = log_f(&states[i * n..(i + 1) * n], next);
                 self.stats.trials += 1;
                 self.stats.density_evaluations += 1;
-                if log_f > log_bound {
+                if value > log_bound {
                     return Err(SmcError::BoundViolated {
                         t,
-                        log_density: log_f,
+                        log_density: value,
                         log_bound,
                     });
                 }
-                if rng.random::<f64>() < (log_f - log_bound).exp() {
+                // Accept with probability exp(value - log_bound): an Exp(1) variable
+                // exceeds log_bound - value with exactly that probability.
+                let e: f64 = Exp1.sample(rng);
+                if e > log_bound - value {
                     *slot = i;
                     continue 'paths;
                 }

@@ -1,0 +1,309 @@
+//! `sysid pf` and `sysid psmooth`: the particle filter and the particle smoothers on a
+//! canonical nonlinear system (`nlbench`), a canonical linear one (`lgss`) or a linear
+//! Gaussian model file (through the SMC adapter, for comparison with `smooth`).
+
+use crate::DataArgs;
+use crate::error::CliError;
+use crate::files::{DataFile, create_output, fmt, read_model};
+use std::io::Write;
+use std::path::PathBuf;
+use sysid::models::{LinearGaussianSmc, Nlbench, lgss};
+use sysid::smc::{
+    Ffbsi, FfbsiReject, FilterModel, FilterOptions, Genealogy, ParticleFilter, Resampling, Series,
+    SmcError, Smoother, Tanizaki, TransitionBound,
+};
+
+/// The model and the filter settings shared by `pf` and `psmooth`.
+#[derive(clap::Args, Debug)]
+pub struct ParticleArgs {
+    /// Canonical system: nlbench or lgss (or give --model).
+    #[arg(long, conflicts_with = "model", required_unless_present = "model")]
+    pub system: Option<String>,
+    /// Linear Gaussian model file (JSON; needs S = 0 and positive definite Q and R).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Number of particles M.
+    #[arg(long, default_value_t = 1000)]
+    pub particles: usize,
+    /// Resampling scheme: multinomial, stratified, systematic or residual.
+    #[arg(long, default_value = "systematic")]
+    pub resample: String,
+    /// Resample when ESS < ess * M; 1 resamples at every step.
+    #[arg(long, default_value_t = 1.0)]
+    pub ess: f64,
+    /// Seed of the random streams.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads for the particle chunks (the result does not depend on it).
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    /// Output CSV file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print a machine-readable summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `sysid psmooth`.
+#[derive(clap::Args, Debug)]
+pub struct SmoothArgs {
+    #[command(flatten)]
+    pub common: ParticleArgs,
+    /// Smoother: tanizaki, ffbsi, ffbsi-reject or genealogy.
+    #[arg(long, default_value = "ffbsi-reject")]
+    pub method: String,
+    /// Number of smoothed paths K (Tanizaki always uses M).
+    #[arg(long, default_value_t = 100)]
+    pub paths: usize,
+}
+
+fn smc_error(context: &str) -> impl Fn(SmcError) -> CliError + '_ {
+    move |source| CliError::Smc {
+        context: context.to_string(),
+        source,
+    }
+}
+
+fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions, CliError> {
+    let resampling = Resampling::from_name(&a.resample).ok_or_else(|| CliError::BadOption {
+        option: "--resample",
+        message: format!(
+            "unknown scheme {:?} (known: {})",
+            a.resample,
+            Resampling::ALL.map(Resampling::name).join(", ")
+        ),
+    })?;
+    if a.threads == 0 {
+        return Err(CliError::BadOption {
+            option: "--threads",
+            message: "must be at least 1".into(),
+        });
+    }
+    let options = FilterOptions {
+        particles: a.particles,
+        resampling,
+        ess_threshold: a.ess,
+        store_history,
+        parallel: a.threads > 1,
+    };
+    options.check().map_err(smc_error("options"))?;
+    Ok(options)
+}
+
+/// What the command runs on.
+enum ChosenModel {
+    Nlbench(Nlbench),
+    Linear(LinearGaussianSmc),
+}
+
+fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
+    let adapt = |model: &sysid::kalman::LinearGaussianModel, context: String| {
+        LinearGaussianSmc::new(model).map_err(|e| CliError::BadOption {
+            option: "--model",
+            message: format!("{context}: {e}"),
+        })
+    };
+    match (&a.system, &a.model) {
+        (Some(name), _) if name == "nlbench" => Ok(ChosenModel::Nlbench(Nlbench::truth())),
+        (Some(name), _) if name == "lgss" => {
+            Ok(ChosenModel::Linear(adapt(&lgss(), "lgss".into())?))
+        }
+        (Some(name), _) => Err(CliError::UnknownSystem {
+            name: name.clone(),
+            known: "nlbench, lgss".into(),
+        }),
+        (None, Some(path)) => {
+            let model = read_model(path)?;
+            Ok(ChosenModel::Linear(adapt(
+                &model,
+                path.display().to_string(),
+            )?))
+        }
+        (None, None) => Err(CliError::BadOption {
+            option: "--system",
+            message: "give --system or --model".into(),
+        }),
+    }
+}
+
+fn read_series(a: &ParticleArgs, outputs: usize, inputs: usize) -> Result<DataFile, CliError> {
+    let file = a.data.read()?;
+    super::check_column_counts(&file, inputs, outputs)?;
+    Ok(file)
+}
+
+fn pool(threads: usize) -> Result<rayon::ThreadPool, CliError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| CliError::BadOption {
+            option: "--threads",
+            message: e.to_string(),
+        })
+}
+
+/// Writes `t, x1.., [x1_sd..]` rows.
+fn write_states(
+    a: &ParticleArgs,
+    time: &[f64],
+    n: usize,
+    means: &[f64],
+    sds: Option<&[f64]>,
+) -> Result<(), CliError> {
+    let Some(out) = &a.out else { return Ok(()) };
+    let mut w = create_output(out, a.force)?;
+    let io = |source| CliError::Io {
+        path: out.clone(),
+        source,
+    };
+    let mut header = vec!["t".to_string()];
+    header.extend((1..=n).map(|i| format!("x{i}")));
+    if sds.is_some() {
+        header.extend((1..=n).map(|i| format!("x{i}_sd")));
+    }
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    for (k, &t) in time.iter().enumerate() {
+        let mut row = vec![fmt(t)];
+        row.extend(means[k * n..(k + 1) * n].iter().map(|&v| fmt(v)));
+        if let Some(sd) = sds {
+            row.extend(sd[k * n..(k + 1) * n].iter().map(|&v| fmt(v)));
+        }
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.flush().map_err(io)
+}
+
+/// `sysid pf`.
+pub fn run_filter(a: &ParticleArgs) -> Result<(), CliError> {
+    match choose_model(a)? {
+        ChosenModel::Nlbench(m) => filter_with(a, &m, 1, 0),
+        ChosenModel::Linear(m) => {
+            let (p, inputs) = (m.output_dim(), m.input_dim());
+            filter_with(a, &m, p, inputs)
+        }
+    }
+}
+
+fn filter_with<M: FilterModel + Sync>(
+    a: &ParticleArgs,
+    model: &M,
+    outputs: usize,
+    inputs: usize,
+) -> Result<(), CliError> {
+    let options = filter_options(a, false)?;
+    let file = read_series(a, outputs, inputs)?;
+    let context = a.data.data.display().to_string();
+    let series = series_of(&file, &context)?;
+    let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
+    let start = std::time::Instant::now();
+    let run = pool(a.threads)?
+        .install(|| pf.run(model, &series, a.seed))
+        .map_err(smc_error(&context))?;
+    let seconds = start.elapsed().as_secs_f64();
+    write_states(a, &file.time, model.state_dim(), pf.means(), None)?;
+    if a.json {
+        let s = serde_json::json!({
+            "command": "pf", "loglik": run.loglik, "resampled_steps": run.resampled_steps,
+            "steps": series.steps(), "particles": a.particles, "seed": a.seed,
+            "seconds": seconds, "out": a.out,
+        });
+        crate::say(&s.to_string());
+    } else {
+        crate::say(&format!(
+            "loglik estimate {} ({} particles, resampled at {} of {} steps)",
+            run.loglik,
+            a.particles,
+            run.resampled_steps,
+            series.steps()
+        ));
+    }
+    Ok(())
+}
+
+fn series_of<'a>(file: &'a DataFile, context: &str) -> Result<Series<'a>, CliError> {
+    let y = &file.record.y;
+    let u = &file.record.u;
+    Series::new(y.as_slice(), y.nrows())
+        .and_then(|s| s.with_inputs(u.as_slice(), u.nrows()))
+        .map_err(smc_error(context))
+}
+
+/// `sysid psmooth`.
+pub fn run_smoother(a: &SmoothArgs) -> Result<(), CliError> {
+    match choose_model(&a.common)? {
+        ChosenModel::Nlbench(m) => smooth_with(a, &m, 1, 0),
+        ChosenModel::Linear(m) => {
+            let (p, inputs) = (m.output_dim(), m.input_dim());
+            smooth_with(a, &m, p, inputs)
+        }
+    }
+}
+
+fn smooth_with<M: FilterModel + TransitionBound + Sync>(
+    a: &SmoothArgs,
+    model: &M,
+    outputs: usize,
+    inputs: usize,
+) -> Result<(), CliError> {
+    let c = &a.common;
+    let options = filter_options(c, true)?;
+    let file = read_series(c, outputs, inputs)?;
+    let context = c.data.data.display().to_string();
+    let series = series_of(&file, &context)?;
+    let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
+    let parallel = c.threads > 1;
+    let start = std::time::Instant::now();
+    let (run, (paths, stats)) = pool(c.threads)?.install(|| {
+        let run = pf.run(model, &series, c.seed).map_err(smc_error(&context))?;
+        let history = pf.history().expect("history stored");
+        let seed = c.seed.wrapping_add(1);
+        let smoothed = match a.method.as_str() {
+            "tanizaki" => Tanizaki { parallel }.trajectories(model, history, &series, seed),
+            "ffbsi" => Ffbsi { paths: a.paths, parallel }.trajectories(model, history, &series, seed),
+            "ffbsi-reject" => FfbsiReject {
+                paths: a.paths,
+                max_trials: None,
+                parallel,
+            }
+            .trajectories(model, history, &series, seed),
+            "genealogy" => Genealogy { paths: a.paths }.trajectories(model, history, &series, seed),
+            other => {
+                return Err(CliError::BadOption {
+                    option: "--method",
+                    message: format!(
+                        "unknown smoother {other:?} (known: tanizaki, ffbsi, ffbsi-reject, genealogy)"
+                    ),
+                });
+            }
+        }
+        .map_err(smc_error(&context))?;
+        Ok((run, smoothed))
+    })?;
+    let seconds = start.elapsed().as_secs_f64();
+    let (means, sds) = (paths.means(), paths.std_devs());
+    write_states(c, &file.time, model.state_dim(), &means, Some(&sds))?;
+    if c.json {
+        let s = serde_json::json!({
+            "command": "psmooth", "method": a.method, "loglik": run.loglik,
+            "paths": paths.paths(), "particles": c.particles, "steps": series.steps(),
+            "density_evaluations": stats.density_evaluations, "trials": stats.trials,
+            "fallbacks": stats.fallbacks, "seed": c.seed, "seconds": seconds, "out": c.out,
+        });
+        crate::say(&s.to_string());
+    } else {
+        crate::say(&format!(
+            "{}: {} paths from {} particles; filter loglik estimate {}",
+            a.method,
+            paths.paths(),
+            c.particles,
+            run.loglik
+        ));
+    }
+    Ok(())
+}

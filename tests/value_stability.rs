@@ -94,5 +94,5 @@ const PINNED_NLBENCH: [u64; 4] = [
     0xbfbf12536f02eb04,
     0xc0471385ccc7c390,
     0x3fe8e04217e25b76,
-    0x3fee942206a9f7af,
+    0x3fef630a01dac228,
 ];

@@ -32,11 +32,53 @@ fn main() {
     let mut lg = vec![0.0; m];
     let mut w = vec![0.0; m];
     let mut anc = vec![0usize; m];
-    println!("normal draw: {:.2} ns", ns_per(m, reps, || for x in next.iter_mut() { *x = StandardNormal.sample(&mut rng); }));
-    println!("uniform draw: {:.2} ns", ns_per(m, reps, || for x in next.iter_mut() { *x = rng.random::<f64>(); }));
-    println!("sample_transitions: {:.2} ns", ns_per(m, reps, || model.sample_transitions(5, &[], &from, &parents, &mut next, &mut rng)));
-    println!("log_observations: {:.2} ns", ns_per(m, reps, || model.log_observations(5, &[], &[3.0], &next, &mut lg)));
-    println!("normalise: {:.2} ns", ns_per(m, reps, || { black_box(normalise_log_weights(&lg, &mut w)); }));
-    println!("ess: {:.2} ns", ns_per(m, reps, || { black_box(effective_sample_size(&w)); }));
-    println!("systematic: {:.2} ns", ns_per(m, reps, || systematic(&w, 0.3, &mut anc)));
+    println!(
+        "normal draw: {:.2} ns",
+        ns_per(m, reps, || for x in next.iter_mut() {
+            *x = StandardNormal.sample(&mut rng);
+        })
+    );
+    println!(
+        "uniform draw: {:.2} ns",
+        ns_per(m, reps, || for x in next.iter_mut() {
+            *x = rng.random::<f64>();
+        })
+    );
+    println!(
+        "sample_transitions: {:.2} ns",
+        ns_per(m, reps, || model.sample_transitions(
+            5,
+            &[],
+            &from,
+            &parents,
+            &mut next,
+            &mut rng
+        ))
+    );
+    println!(
+        "log_observations: {:.2} ns",
+        ns_per(m, reps, || model.log_observations(
+            5,
+            &[],
+            &[3.0],
+            &next,
+            &mut lg
+        ))
+    );
+    println!(
+        "normalise: {:.2} ns",
+        ns_per(m, reps, || {
+            black_box(normalise_log_weights(&lg, &mut w));
+        })
+    );
+    println!(
+        "ess: {:.2} ns",
+        ns_per(m, reps, || {
+            black_box(effective_sample_size(&w));
+        })
+    );
+    println!(
+        "systematic: {:.2} ns",
+        ns_per(m, reps, || systematic(&w, 0.3, &mut anc))
+    );
 }

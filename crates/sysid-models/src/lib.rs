@@ -10,9 +10,11 @@
 //! [`LinearGaussianSmc`] lets any linear Gaussian model run through the particle
 //! methods of `sysid-smc`, which is how they are checked against the Kalman answer.
 
+mod affine;
 mod linear_smc;
 mod nlbench;
 
+pub use affine::{LinearAffine, NlbenchAffine};
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
 pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
 

@@ -1,0 +1,63 @@
+//! Models affine in their parameters, and their parameter values.
+
+use super::AffineEmError;
+use nalgebra::{DMatrix, DVector};
+use sysid_smc::{FilterModel, TransitionDensity};
+
+/// The parameters `theta = (beta, Pi, mu, P1)` of an [`AffineModel`], split into the
+/// state block (rows of `x_{t+1}`) and the output block (rows of `y_t`):
+/// ```text
+/// x_{t+1} = beta_x alpha_t + w_t,  w_t ~ N(0, Pi_x)
+/// y_t     = beta_y alpha_t + e_t,  e_t ~ N(0, Pi_y),   x_0 ~ N(mu, P1)
+/// ```
+/// Coefficients outside a row's regressor set (structural zeros) are zero.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AffineParams {
+    /// State coefficients, `n_x x n_alpha`.
+    pub beta_x: DMatrix<f64>,
+    /// Output coefficients, `n_y x n_alpha`.
+    pub beta_y: DMatrix<f64>,
+    /// Process-noise covariance, `n_x x n_x`.
+    pub pi_x: DMatrix<f64>,
+    /// Measurement-noise covariance, `n_y x n_y`.
+    pub pi_y: DMatrix<f64>,
+    /// Initial-state mean.
+    pub mu: DVector<f64>,
+    /// Initial-state covariance.
+    pub p1: DMatrix<f64>,
+}
+
+/// A nonlinear state-space model affine in its parameters (ALGORITHMS.md 3):
+/// `xi_t = [x_{t+1}; y_t] = beta alpha(x_t, u_t, t) + eta_t`, `eta_t ~ N(0, Pi)`
+/// with `Pi` block-diagonal (independent process and measurement noise, as the
+/// bootstrap filter needs).
+///
+/// The model supplies the regressors `alpha`, which regressors each row uses, and an
+/// SMC model for given parameters (the particle E-step runs on it).
+pub trait AffineModel: Sync {
+    /// The SMC model at given parameters.
+    type Smc: FilterModel + TransitionDensity + Sync;
+
+    /// Dimension of `x`.
+    fn state_dim(&self) -> usize;
+    /// Dimension of `y`.
+    fn output_dim(&self) -> usize;
+    /// Dimension of `alpha`.
+    fn regressor_dim(&self) -> usize;
+    /// Writes `alpha(x_t, u_t, t)` into `out`.
+    fn regressors(&self, t: usize, x: &[f64], u: &[f64], out: &mut [f64]);
+
+    /// The regressors each state row uses (default: all).
+    fn state_structure(&self) -> Vec<Vec<usize>> {
+        vec![(0..self.regressor_dim()).collect(); self.state_dim()]
+    }
+
+    /// The regressors each output row uses (default: all).
+    fn output_structure(&self) -> Vec<Vec<usize>> {
+        vec![(0..self.regressor_dim()).collect(); self.output_dim()]
+    }
+
+    /// The SMC model at `params`; errors on invalid values (e.g. a non-positive
+    /// variance).
+    fn smc_model(&self, params: &AffineParams) -> Result<Self::Smc, AffineEmError>;
+}

@@ -1,0 +1,169 @@
+//! The canonical systems in the affine form of `sysid_em::affine`.
+
+use crate::{LinearGaussianSmc, Nlbench, NlbenchParams};
+use nalgebra::{dmatrix, dvector};
+use sysid_em::affine::{AffineEmError, AffineModel, AffineParams};
+use sysid_kalman::LinearGaussianModel;
+
+/// `nlbench` as an affine model: the state row uses the regressors
+/// `[x, x/(1+x²), cos(1.2 (t+1))]`, the output row `[x²]`:
+/// ```text
+/// alpha_t = [x_t, x_t/(1+x_t^2), cos(1.2 (t+1)), x_t^2]
+/// beta_x  = [a, b, c, 0],  beta_y = [0, 0, 0, d],  Pi = diag(q, r)
+/// ```
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NlbenchAffine;
+
+impl NlbenchAffine {
+    /// The affine parameters of an [`NlbenchParams`].
+    pub fn params(p: &NlbenchParams) -> AffineParams {
+        AffineParams {
+            beta_x: dmatrix![p.a, p.b, p.c, 0.0],
+            beta_y: dmatrix![0.0, 0.0, 0.0, p.d],
+            pi_x: dmatrix![p.q],
+            pi_y: dmatrix![p.r],
+            mu: dvector![p.mu],
+            p1: dmatrix![p.p1],
+        }
+    }
+
+    /// The [`NlbenchParams`] of affine parameters.
+    pub fn nlbench_params(p: &AffineParams) -> NlbenchParams {
+        NlbenchParams {
+            a: p.beta_x[(0, 0)],
+            b: p.beta_x[(0, 1)],
+            c: p.beta_x[(0, 2)],
+            d: p.beta_y[(0, 3)],
+            q: p.pi_x[(0, 0)],
+            r: p.pi_y[(0, 0)],
+            mu: p.mu[0],
+            p1: p.p1[(0, 0)],
+        }
+    }
+}
+
+fn check_shapes(p: &AffineParams, n: usize, ny: usize, r: usize) -> Result<(), AffineEmError> {
+    let ok = p.beta_x.shape() == (n, r)
+        && p.beta_y.shape() == (ny, r)
+        && p.pi_x.shape() == (n, n)
+        && p.pi_y.shape() == (ny, ny)
+        && p.mu.len() == n
+        && p.p1.shape() == (n, n);
+    if ok {
+        Ok(())
+    } else {
+        Err(AffineEmError::InvalidParams(format!(
+            "expected beta_x {n}x{r}, beta_y {ny}x{r}, Pi_x {n}x{n}, Pi_y {ny}x{ny}, mu {n}, P1 {n}x{n}"
+        )))
+    }
+}
+
+impl AffineModel for NlbenchAffine {
+    type Smc = Nlbench;
+
+    fn state_dim(&self) -> usize {
+        1
+    }
+    fn output_dim(&self) -> usize {
+        1
+    }
+    fn regressor_dim(&self) -> usize {
+        4
+    }
+
+    #[inline]
+    fn regressors(&self, t: usize, x: &[f64], _u: &[f64], out: &mut [f64]) {
+        let x = x[0];
+        out[0] = x;
+        out[1] = x / (1.0 + x * x);
+        out[2] = (1.2 * (t as f64 + 1.0)).cos();
+        out[3] = x * x;
+    }
+
+    fn state_structure(&self) -> Vec<Vec<usize>> {
+        vec![vec![0, 1, 2]]
+    }
+
+    fn output_structure(&self) -> Vec<Vec<usize>> {
+        vec![vec![3]]
+    }
+
+    fn smc_model(&self, params: &AffineParams) -> Result<Nlbench, AffineEmError> {
+        check_shapes(params, 1, 1, 4)?;
+        Nlbench::new(NlbenchAffine::nlbench_params(params)).map_err(AffineEmError::InvalidParams)
+    }
+}
+
+/// A linear Gaussian model without inputs, offsets or cross-covariance, as an affine
+/// model with `alpha = x`: `beta_x = A`, `beta_y = C`, `Pi = blockdiag(Q, R)`. Used
+/// to check particle EM against exact linear EM.
+#[derive(Debug, Clone)]
+pub struct LinearAffine {
+    n: usize,
+    p: usize,
+}
+
+impl LinearAffine {
+    /// The affine form of `model` and its parameters. Errors for a model with inputs
+    /// or a non-zero cross-covariance (the form has neither).
+    pub fn new(model: &LinearGaussianModel) -> Result<(Self, AffineParams), AffineEmError> {
+        if model.m() > 0 || model.has_cross_covariance() || model.h().iter().any(|&v| v != 0.0) {
+            return Err(AffineEmError::Unsupported(
+                "the linear affine form has no inputs, offset or cross-covariance".into(),
+            ));
+        }
+        let params = AffineParams {
+            beta_x: model.a().clone(),
+            beta_y: model.c().clone(),
+            pi_x: model.q().clone(),
+            pi_y: model.r().clone(),
+            mu: model.mu().clone(),
+            p1: model.p1().clone(),
+        };
+        Ok((
+            LinearAffine {
+                n: model.n(),
+                p: model.p(),
+            },
+            params,
+        ))
+    }
+
+    /// The linear Gaussian model of affine parameters.
+    pub fn model(&self, p: &AffineParams) -> Result<LinearGaussianModel, AffineEmError> {
+        check_shapes(p, self.n, self.p, self.n)?;
+        LinearGaussianModel::builder(
+            p.beta_x.clone(),
+            p.beta_y.clone(),
+            p.pi_x.clone(),
+            p.pi_y.clone(),
+        )
+        .mu(p.mu.clone())
+        .p1(p.p1.clone())
+        .build()
+        .map_err(|e| AffineEmError::InvalidParams(e.to_string()))
+    }
+}
+
+impl AffineModel for LinearAffine {
+    type Smc = LinearGaussianSmc;
+
+    fn state_dim(&self) -> usize {
+        self.n
+    }
+    fn output_dim(&self) -> usize {
+        self.p
+    }
+    fn regressor_dim(&self) -> usize {
+        self.n
+    }
+
+    fn regressors(&self, _t: usize, x: &[f64], _u: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(x);
+    }
+
+    fn smc_model(&self, params: &AffineParams) -> Result<LinearGaussianSmc, AffineEmError> {
+        LinearGaussianSmc::new(&self.model(params)?)
+            .map_err(|e| AffineEmError::InvalidParams(e.to_string()))
+    }
+}

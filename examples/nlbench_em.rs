@@ -14,7 +14,7 @@ struct Print;
 
 impl EmObserver<AffineParams> for Print {
     fn iteration(&mut self, info: &IterationInfo<'_, AffineParams>) {
-        if info.iteration % 50 == 0 || info.iteration == 1 {
+        if info.iteration.is_multiple_of(50) || info.iteration == 1 {
             let p = NlbenchAffine::nlbench_params(info.estimate);
             println!(
                 "{:5}  loglik {:10.3}  a {:.4}  b {:7.3}  c {:.4}  d {:.5}  ({:.1} s)",

@@ -5,11 +5,13 @@
 //! ```text
 //! cargo run --release -p sysid-bench -- kalman [--reps 21]
 //! cargo run --release -p sysid-bench -- smc [--reps 21]
+//! cargo run --release -p sysid-bench -- nlbench-em [--runs 200 --iters 1000 --particles 50 --shard 0/2]
 //! ```
 
 mod em;
 mod kalman;
 mod lti2x2;
+mod nlbench_em;
 mod smc;
 
 use clap::{Parser, Subcommand};
@@ -50,6 +52,36 @@ enum Runner {
         #[arg(long, default_value_t = 21)]
         reps: usize,
     },
+    /// Seed-000 particle-EM study on nlbench (one JSON line per run, then a summary).
+    NlbenchEm {
+        /// Number of Monte Carlo runs (each with its own data set and start).
+        #[arg(long, default_value_t = 200)]
+        runs: usize,
+        /// EM iterations per run.
+        #[arg(long, default_value_t = 1000)]
+        iters: usize,
+        /// Particles M (and smoothed paths for ffbsi-reject).
+        #[arg(long, default_value_t = 50)]
+        particles: usize,
+        /// Data length T.
+        #[arg(long, default_value_t = 1000)]
+        steps: usize,
+        /// E-step smoother: tanizaki (the paper's) or ffbsi-reject.
+        #[arg(long, default_value = "tanizaki")]
+        smoother: String,
+        /// Study seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Run only the runs r with r % n == i, given as i/n.
+        #[arg(long, default_value = "0/1")]
+        shard: String,
+        /// Write the (run, iteration, a, b, c, d) trajectories to this CSV file.
+        #[arg(long)]
+        trace_out: Option<std::path::PathBuf>,
+        /// Replace an existing trace file.
+        #[arg(long)]
+        force: bool,
+    },
     /// Seed-004 reproduction: EM from the paper's initial model and from N4SID on
     /// lti2x2 data sets.
     Lti2x2 {
@@ -77,6 +109,40 @@ fn main() {
         Runner::Kalman { reps, system } => kalman::run(reps.max(1), system.as_deref()),
         Runner::Em { reps } => em::run(reps.max(1)),
         Runner::Smc { reps } => smc::run(reps.max(1)),
+        Runner::NlbenchEm {
+            runs,
+            iters,
+            particles,
+            steps,
+            smoother,
+            seed,
+            shard,
+            trace_out,
+            force,
+        } => {
+            let parsed = shard
+                .split_once('/')
+                .and_then(|(i, n)| Some((i.parse().ok()?, n.parse().ok()?)));
+            let Some(shard) = parsed else {
+                eprintln!("sysid-bench: error: --shard {shard:?}: expected i/n");
+                std::process::exit(2);
+            };
+            let args = nlbench_em::Args {
+                runs,
+                iters,
+                particles,
+                steps,
+                smoother,
+                seed,
+                shard,
+                trace_out,
+                force,
+            };
+            if let Err(e) = nlbench_em::run(&args) {
+                eprintln!("sysid-bench: error: {e}");
+                std::process::exit(2);
+            }
+        }
         Runner::Lti2x2 {
             datasets,
             steps,

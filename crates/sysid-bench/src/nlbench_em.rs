@@ -1,0 +1,203 @@
+//! `nlbench-em` runner: the seed-000 particle-EM study (ALGORITHMS.md 3).
+//!
+//! Run `r` draws its data set from seed `stream(seed, 3r)`, its starting point (each of
+//! a, b, c, d times an independent U[0.5, 1.5]) from `stream(seed, 3r + 1)` and its EM
+//! random streams from `stream(seed, 3r + 2)`, so a run's output depends only on
+//! `(seed, r)`: runs go in parallel in any order, and shards (`--shard i/n` takes the
+//! runs with `r % n == i`) merge into exactly the unsharded output.
+
+use crate::emit;
+use rand::RngExt;
+use rayon::prelude::*;
+use serde_json::json;
+use std::io::Write;
+use sysid::em::affine::{AffineEm, AffineEmSpec, AffineParams};
+use sysid::em::linear::Covariance;
+use sysid::em::{EmObserver, EmOptions, IterationInfo, run_em};
+use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
+use sysid::smc::{FfbsiReject, Series, Smoother, Tanizaki, stream};
+
+/// The runner's settings.
+pub struct Args {
+    pub runs: usize,
+    pub iters: usize,
+    pub particles: usize,
+    pub steps: usize,
+    pub smoother: String,
+    pub seed: u64,
+    pub shard: (usize, usize),
+    pub trace_out: Option<std::path::PathBuf>,
+    pub force: bool,
+}
+
+/// One run's result.
+struct RunResult {
+    run: usize,
+    start: NlbenchParams,
+    estimate: NlbenchParams,
+    iterations: usize,
+    decreases: usize,
+    final_loglik: f64,
+    seconds: f64,
+    /// (a, b, c, d) after each iteration
+    trace: Vec<[f64; 4]>,
+}
+
+fn abcd(p: &NlbenchParams) -> [f64; 4] {
+    [p.a, p.b, p.c, p.d]
+}
+
+/// Every one of a, b, c, d within 10 % of the truth.
+fn converged(p: &NlbenchParams) -> bool {
+    let truth = abcd(&NlbenchParams::TRUE);
+    abcd(p)
+        .iter()
+        .zip(truth)
+        .all(|(v, t)| ((v - t) / t).abs() <= 0.1)
+}
+
+struct Trace(Vec<[f64; 4]>);
+
+impl EmObserver<AffineParams> for Trace {
+    fn iteration(&mut self, info: &IterationInfo<'_, AffineParams>) {
+        self.0
+            .push(abcd(&NlbenchAffine::nlbench_params(info.estimate)));
+    }
+}
+
+fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<RunResult, String> {
+    let seed_of = |k: u64| -> u64 { stream(a.seed, 3 * run as u64 + k).random() };
+    let sim = Nlbench::truth().simulate(a.steps, seed_of(0));
+    let data = Series::new(&sim.outputs, 1).map_err(|e| e.to_string())?;
+    let mut rng = stream(seed_of(1), 0);
+    let mut factor = || rng.random_range(0.5..1.5);
+    let truth = NlbenchParams::TRUE;
+    let start = NlbenchParams {
+        a: truth.a * factor(),
+        b: truth.b * factor(),
+        c: truth.c * factor(),
+        d: truth.d * factor(),
+        ..truth
+    };
+    // q and r known (ALGORITHMS.md 3): only a, b, c, d are estimated.
+    let spec = AffineEmSpec {
+        pi_x: Covariance::Fixed,
+        pi_y: Covariance::Fixed,
+        ..AffineEmSpec::default()
+    };
+    let model = NlbenchAffine;
+    let mut em = AffineEm::new(&model, data, a.particles, smoother, spec, seed_of(2))
+        .map_err(|e| e.to_string())?;
+    let options = EmOptions {
+        max_iterations: a.iters,
+        tol: 0.0,
+        ..EmOptions::default()
+    }
+    .check()
+    .map_err(|e| e.to_string())?;
+    let mut trace = Trace(Vec::with_capacity(a.iters));
+    let result = run_em(&mut em, NlbenchAffine::params(&start), &options, &mut trace);
+    Ok(RunResult {
+        run,
+        start,
+        estimate: NlbenchAffine::nlbench_params(&result.estimate),
+        iterations: result.iterations,
+        decreases: result.decreases,
+        final_loglik: result.loglik.unwrap_or(f64::NAN),
+        seconds: result.elapsed.as_secs_f64(),
+        trace: trace.0,
+    })
+}
+
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    let pos = q * (sorted.len() - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    sorted[lo] + (pos - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+/// Runs the study and prints JSON lines.
+pub fn run(a: &Args) -> Result<(), String> {
+    if a.runs == 0 || a.iters == 0 || a.particles == 0 || a.steps < 2 {
+        return Err("--runs, --iters and --particles must be >= 1 and --steps >= 2".into());
+    }
+    let (index, count) = a.shard;
+    if count == 0 || index >= count {
+        return Err(format!("--shard {index}/{count}: need 0 <= i < n"));
+    }
+    if let Some(path) = &a.trace_out {
+        if path.exists() && !a.force {
+            return Err(format!(
+                "{}: refusing to overwrite (use --force)",
+                path.display()
+            ));
+        }
+    }
+    let runs: Vec<usize> = (0..a.runs).filter(|r| r % count == index).collect();
+    let started = std::time::Instant::now();
+    let results: Vec<Result<RunResult, String>> = runs
+        .par_iter()
+        .map(|&run| match a.smoother.as_str() {
+            "tanizaki" => run_one(a, run, Tanizaki::default()),
+            "ffbsi-reject" => run_one(
+                a,
+                run,
+                FfbsiReject {
+                    paths: a.particles,
+                    max_trials: None,
+                    parallel: false,
+                },
+            ),
+            other => Err(format!(
+                "--smoother {other:?}: use tanizaki or ffbsi-reject"
+            )),
+        })
+        .collect();
+    let results: Vec<RunResult> = results.into_iter().collect::<Result<_, _>>()?;
+    let params = json!({"T": a.steps, "M": a.particles, "iters": a.iters, "runs": a.runs,
+        "smoother": a.smoother, "seed": a.seed, "shard": format!("{index}/{count}")});
+    for r in &results {
+        let [sa, sb, sc, sd] = abcd(&r.start);
+        let [ea, eb, ec, ed] = abcd(&r.estimate);
+        emit(&json!({
+            "task": "nlbench_em_run", "params": params, "run": r.run,
+            "start": {"a": sa, "b": sb, "c": sc, "d": sd},
+            "estimate": {"a": ea, "b": eb, "c": ec, "d": ed},
+            "converged": converged(&r.estimate), "iterations": r.iterations,
+            "likelihood_decreases": r.decreases, "final_loglik": r.final_loglik,
+            "seconds": r.seconds,
+        }));
+    }
+    if let Some(path) = &a.trace_out {
+        let mut w = std::io::BufWriter::new(
+            std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?,
+        );
+        let io = |e: std::io::Error| format!("{}: {e}", path.display());
+        writeln!(w, "run,iteration,a,b,c,d").map_err(io)?;
+        for r in &results {
+            for (k, v) in r.trace.iter().enumerate() {
+                writeln!(w, "{},{},{},{},{},{}", r.run, k + 1, v[0], v[1], v[2], v[3])
+                    .map_err(io)?;
+            }
+        }
+        w.flush().map_err(io)?;
+    }
+    let converged_count = results.iter().filter(|r| converged(&r.estimate)).count();
+    let summary_of = |f: fn(&NlbenchParams) -> f64| {
+        let mut v: Vec<f64> = results.iter().map(|r| f(&r.estimate)).collect();
+        v.sort_by(f64::total_cmp);
+        json!({"median": quantile(&v, 0.5), "q25": quantile(&v, 0.25), "q75": quantile(&v, 0.75)})
+    };
+    let mut seconds: Vec<f64> = results.iter().map(|r| r.seconds).collect();
+    seconds.sort_by(f64::total_cmp);
+    emit(&json!({
+        "task": "nlbench_em_summary", "params": params,
+        "runs_done": results.len(), "converged": converged_count,
+        "fraction_converged": converged_count as f64 / results.len() as f64,
+        "a": summary_of(|p| p.a), "b": summary_of(|p| p.b),
+        "c": summary_of(|p| p.c), "d": summary_of(|p| p.d),
+        "seconds_per_run_median": quantile(&seconds, 0.5),
+        "wall_seconds": started.elapsed().as_secs_f64(),
+        "threads": rayon::current_num_threads(),
+    }));
+    Ok(())
+}

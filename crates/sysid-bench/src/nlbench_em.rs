@@ -124,13 +124,14 @@ pub fn run(a: &Args) -> Result<(), String> {
     if count == 0 || index >= count {
         return Err(format!("--shard {index}/{count}: need 0 <= i < n"));
     }
-    if let Some(path) = &a.trace_out {
-        if path.exists() && !a.force {
-            return Err(format!(
-                "{}: refusing to overwrite (use --force)",
-                path.display()
-            ));
-        }
+    if let Some(path) = &a.trace_out
+        && path.exists()
+        && !a.force
+    {
+        return Err(format!(
+            "{}: refusing to overwrite (use --force)",
+            path.display()
+        ));
     }
     let runs: Vec<usize> = (0..a.runs).filter(|r| r % count == index).collect();
     let started = std::time::Instant::now();

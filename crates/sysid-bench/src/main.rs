@@ -82,6 +82,11 @@ enum Runner {
         #[arg(long)]
         force: bool,
     },
+    /// Merges the outputs of `nlbench-em` shards into one set of run lines and summary.
+    NlbenchEmMerge {
+        /// JSON-lines files written by `nlbench-em --shard i/n`.
+        files: Vec<std::path::PathBuf>,
+    },
     /// Seed-004 reproduction: EM from the paper's initial model and from N4SID on
     /// lti2x2 data sets.
     Lti2x2 {
@@ -139,6 +144,12 @@ fn main() {
                 force,
             };
             if let Err(e) = nlbench_em::run(&args) {
+                eprintln!("sysid-bench: error: {e}");
+                std::process::exit(2);
+            }
+        }
+        Runner::NlbenchEmMerge { files } => {
+            if let Err(e) = nlbench_em::merge(&files) {
                 eprintln!("sysid-bench: error: {e}");
                 std::process::exit(2);
             }

@@ -182,23 +182,81 @@ pub fn run(a: &Args) -> Result<(), String> {
         }
         w.flush().map_err(io)?;
     }
-    let converged_count = results.iter().filter(|r| converged(&r.estimate)).count();
+    let estimates: Vec<NlbenchParams> = results.iter().map(|r| r.estimate).collect();
+    let seconds: Vec<f64> = results.iter().map(|r| r.seconds).collect();
+    let mut summary = summary_json(&params, &estimates, &seconds);
+    summary["wall_seconds"] = json!(started.elapsed().as_secs_f64());
+    summary["threads"] = json!(rayon::current_num_threads());
+    emit(&summary);
+    Ok(())
+}
+
+/// The study summary of a set of runs: fraction converged, median and IQR of each
+/// estimate, median seconds per run. Computed from the run lines alone, so merged
+/// shards give the same figures as one unsharded run.
+fn summary_json(
+    params: &serde_json::Value,
+    estimates: &[NlbenchParams],
+    seconds: &[f64],
+) -> serde_json::Value {
+    let converged_count = estimates.iter().filter(|p| converged(p)).count();
     let summary_of = |f: fn(&NlbenchParams) -> f64| {
-        let mut v: Vec<f64> = results.iter().map(|r| f(&r.estimate)).collect();
+        let mut v: Vec<f64> = estimates.iter().map(f).collect();
         v.sort_by(f64::total_cmp);
         json!({"median": quantile(&v, 0.5), "q25": quantile(&v, 0.25), "q75": quantile(&v, 0.75)})
     };
-    let mut seconds: Vec<f64> = results.iter().map(|r| r.seconds).collect();
+    let mut seconds = seconds.to_vec();
     seconds.sort_by(f64::total_cmp);
-    emit(&json!({
+    json!({
         "task": "nlbench_em_summary", "params": params,
-        "runs_done": results.len(), "converged": converged_count,
-        "fraction_converged": converged_count as f64 / results.len() as f64,
+        "runs_done": estimates.len(), "converged": converged_count,
+        "fraction_converged": converged_count as f64 / estimates.len() as f64,
         "a": summary_of(|p| p.a), "b": summary_of(|p| p.b),
         "c": summary_of(|p| p.c), "d": summary_of(|p| p.d),
         "seconds_per_run_median": quantile(&seconds, 0.5),
-        "wall_seconds": started.elapsed().as_secs_f64(),
-        "threads": rayon::current_num_threads(),
-    }));
+    })
+}
+
+/// Merges the JSON-lines outputs of shards: re-emits the run lines in run order (each
+/// run once) and the summary of all of them.
+pub fn merge(files: &[std::path::PathBuf]) -> Result<(), String> {
+    let mut runs: std::collections::BTreeMap<u64, serde_json::Value> = Default::default();
+    for path in files {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        for (k, line) in text.lines().enumerate() {
+            let value: serde_json::Value = serde_json::from_str(line)
+                .map_err(|e| format!("{}, line {}: {e}", path.display(), k + 1))?;
+            if value["task"] == "nlbench_em_run" {
+                let run = value["run"]
+                    .as_u64()
+                    .ok_or_else(|| format!("{}, line {}: no run index", path.display(), k + 1))?;
+                runs.insert(run, value);
+            }
+        }
+    }
+    let Some(first) = runs.values().next() else {
+        return Err("no nlbench_em_run lines in the inputs".into());
+    };
+    let mut params = first["params"].clone();
+    params["shard"] = json!(format!("merged from {} files", files.len()));
+    let field = |v: &serde_json::Value, k: &str| v["estimate"][k].as_f64().unwrap_or(f64::NAN);
+    let estimates: Vec<NlbenchParams> = runs
+        .values()
+        .map(|v| NlbenchParams {
+            a: field(v, "a"),
+            b: field(v, "b"),
+            c: field(v, "c"),
+            d: field(v, "d"),
+            ..NlbenchParams::TRUE
+        })
+        .collect();
+    let seconds: Vec<f64> = runs
+        .values()
+        .map(|v| v["seconds"].as_f64().unwrap_or(f64::NAN))
+        .collect();
+    for v in runs.values() {
+        emit(v);
+    }
+    emit(&summary_json(&params, &estimates, &seconds));
     Ok(())
 }

@@ -5,7 +5,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use sysid::em::EmAlgorithm;
-use sysid::em::linear::{LinearEm, LinearEmSpec};
+use sysid::em::linear::LinearEm;
 use sysid::prelude::*;
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
@@ -20,12 +20,7 @@ fn em(c: &mut Criterion) {
         let start = n4sid(&sim.record, &options).unwrap().model;
         let start = start.without_cross_covariance();
         let records = [sim.record];
-        let spec = LinearEmSpec {
-            h: false,
-            mu: false,
-            p1: false,
-            ..LinearEmSpec::default()
-        };
+        let spec = sysid::models::lti2x2_em_spec();
         let mut em = LinearEm::new(&records, spec);
         group.bench_function(format!("iteration/lti2x2/T{steps}"), |b| {
             b.iter(|| black_box(em.step(black_box(&start)).unwrap()))

@@ -5,7 +5,7 @@
 //! The whole 100-data-set study is `cargo run --release -p sysid-bench -- lti2x2`.
 
 use sysid::em::EmOptions;
-use sysid::em::linear::{LinearEmSpec, fit};
+use sysid::em::linear::fit;
 use sysid::prelude::*;
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
@@ -43,12 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .relative_response_error(&truth, 512)
             .unwrap_or(f64::NAN)
     );
-    let spec = LinearEmSpec {
-        h: false,
-        mu: false,
-        p1: false,
-        ..LinearEmSpec::default()
-    };
+    let spec = sysid::models::lti2x2_em_spec();
     let options = EmOptions {
         max_iterations: 1000,
         tol: 1e-7,

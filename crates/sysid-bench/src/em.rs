@@ -5,7 +5,7 @@ use crate::emit;
 use serde_json::json;
 use std::time::Instant;
 use sysid::em::EmAlgorithm;
-use sysid::em::linear::{LinearEm, LinearEmSpec};
+use sysid::em::linear::LinearEm;
 use sysid::models::System;
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
@@ -37,12 +37,7 @@ pub fn run(reps: usize) {
         .model;
         let start = start.without_cross_covariance();
         let records = [sim.record];
-        let spec = LinearEmSpec {
-            h: false,
-            mu: false,
-            p1: false,
-            ..LinearEmSpec::default()
-        };
+        let spec = sysid::models::lti2x2_em_spec();
         let mut em = LinearEm::new(&records, spec);
         let (median, min, max) = time_ms(reps, || {
             std::hint::black_box(em.step(&start).expect("step"));

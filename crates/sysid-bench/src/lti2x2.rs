@@ -8,7 +8,7 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde_json::{Value, json};
 use std::time::Instant;
-use sysid::em::linear::{LinearEmSpec, fit};
+use sysid::em::linear::fit;
 use sysid::em::{EmOptions, Termination};
 use sysid::kalman::{KalmanWorkspace, LinearGaussianModel};
 use sysid::models::{System, lti2x2, lti2x2_experiment_start, lti2x2_initial_guess};
@@ -48,12 +48,7 @@ fn one_dataset(index: usize, args: &Args) -> Vec<Value> {
     let loglik_true = KalmanWorkspace::new()
         .loglik(&truth, &records[0])
         .expect("loglik");
-    let spec = LinearEmSpec {
-        h: false,
-        mu: false,
-        p1: false,
-        ..LinearEmSpec::default()
-    };
+    let spec = sysid::models::lti2x2_em_spec();
     let options = EmOptions {
         max_iterations: args.max_iter,
         tol: args.tol,

@@ -128,10 +128,9 @@ fn main() {
             let parsed = shard
                 .split_once('/')
                 .and_then(|(i, n)| Some((i.parse().ok()?, n.parse().ok()?)));
-            let Some(shard) = parsed else {
-                eprintln!("sysid-bench: error: --shard {shard:?}: expected i/n");
-                std::process::exit(2);
-            };
+            let shard = parsed
+                .ok_or_else(|| format!("--shard {shard:?}: expected i/n"))
+                .unwrap_or_else(|e| exit_with(&e));
             let args = nlbench_em::Args {
                 runs,
                 iters,
@@ -143,16 +142,10 @@ fn main() {
                 trace_out,
                 force,
             };
-            if let Err(e) = nlbench_em::run(&args) {
-                eprintln!("sysid-bench: error: {e}");
-                std::process::exit(2);
-            }
+            nlbench_em::run(&args).unwrap_or_else(|e| exit_with(&e));
         }
         Runner::NlbenchEmMerge { files } => {
-            if let Err(e) = nlbench_em::merge(&files) {
-                eprintln!("sysid-bench: error: {e}");
-                std::process::exit(2);
-            }
+            nlbench_em::merge(&files).unwrap_or_else(|e| exit_with(&e));
         }
         Runner::Lti2x2 {
             datasets,
@@ -168,6 +161,12 @@ fn main() {
             tol,
         }),
     }
+}
+
+/// Reports a bad-input error in one line and exits with code 2.
+fn exit_with(error: &str) -> ! {
+    eprintln!("sysid-bench: error: {error}");
+    std::process::exit(2);
 }
 
 /// Prints one JSON line; a closed stdout (e.g. `| head -1`) ends the program quietly,

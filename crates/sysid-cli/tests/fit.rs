@@ -178,42 +178,18 @@ fn fit_rejects_bad_fixes_and_empty_data() {
     let dir = scratch_dir();
     let data = lti2x2_csv(&dir, "300");
     let out_json = dir.join("m.json");
-    let out = sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&data),
-        "--order",
-        "4",
-        "--fix",
-        "Z=1",
-        "--out",
-        s(&out_json),
-    ]);
+    // `sysid fit lti --data DATA <options> --out m.json`
+    let fit_lti = |data: &std::path::Path, options: &[&str]| {
+        let mut args = vec!["fit", "lti", "--data", s(data)];
+        args.extend_from_slice(options);
+        args.extend(["--out", s(&out_json)]);
+        sysid(&args)
+    };
+    let out = fit_lti(&data, &["--order", "4", "--fix", "Z=1"]);
     assert_one_line_error(&out, &["--fix", "unknown matrix \"Z\""]);
-    let out = sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&data),
-        "--order",
-        "4",
-        "--fix",
-        "A=[[1, 0], [0, 1]]",
-        "--out",
-        s(&out_json),
-    ]);
+    let out = fit_lti(&data, &["--order", "4", "--fix", "A=[[1, 0], [0, 1]]"]);
     assert_one_line_error(&out, &["--fix", "A: expected a 4x4 value, got 2x2"]);
-    let out = sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&data),
-        "--fix",
-        "A",
-        "--out",
-        s(&out_json),
-    ]);
+    let out = fit_lti(&data, &["--fix", "A"]);
     assert_one_line_error(&out, &["--order"]);
     // every output missing: n4sid start is impossible, and so is EM from a file
     let empty = dir.join("empty.csv");
@@ -222,16 +198,7 @@ fn fit_rejects_bad_fixes_and_empty_data() {
         csv += &format!("{t},0.5,-0.5,,\n");
     }
     std::fs::write(&empty, csv).unwrap();
-    let out = sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&empty),
-        "--order",
-        "2",
-        "--out",
-        s(&out_json),
-    ]);
+    let out = fit_lti(&empty, &["--order", "2"]);
     assert_one_line_error(&out, &["missing at time 1"]);
     let model = dir.join("true.json");
     assert!(

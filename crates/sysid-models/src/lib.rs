@@ -121,6 +121,17 @@ pub fn lti2x2_initial_guess() -> LinearGaussianModel {
     )
 }
 
+/// What linear EM estimates in the seed-004 experiment: `A, B, C, D, Q, R`, with the
+/// offset `h` and the initial state (`mu`, `P1`) held at their known values.
+pub fn lti2x2_em_spec() -> sysid_em::linear::LinearEmSpec {
+    sysid_em::linear::LinearEmSpec {
+        h: false,
+        mu: false,
+        p1: false,
+        ..sysid_em::linear::LinearEmSpec::default()
+    }
+}
+
 /// A model moved to the known facts of the seed-004 experiment, as an EM start: no
 /// output offset, the system at rest (`mu = 0`, `P1 = 0`), and `S = 0` (linear EM holds
 /// `S`).

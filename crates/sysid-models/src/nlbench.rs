@@ -147,6 +147,20 @@ impl Nlbench {
         self.params.a * x + self.params.b * x / (1.0 + x * x) + forcing
     }
 
+    /// `log N(next; mean, q)`.
+    #[inline(always)]
+    fn log_transition_density(&self, mean: f64, next: f64) -> f64 {
+        let e = next - mean;
+        self.log_norm_q - self.half_inv_q * e * e
+    }
+
+    /// `log N(y; d x^2, r)`.
+    #[inline(always)]
+    fn log_observation_density(&self, x: f64, y: f64) -> f64 {
+        let e = y - self.params.d * x * x;
+        self.log_norm_r - self.half_inv_r * e * e
+    }
+
     /// Simulates `steps` samples from the random stream `(seed, 0)`: the initial state,
     /// then per step the measurement noise and the process noise.
     pub fn simulate(&self, steps: usize, seed: u64) -> NlbenchSimulation {
@@ -216,15 +230,13 @@ impl TransitionSampler for Nlbench {
 impl ObservationDensity for Nlbench {
     #[inline]
     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
-        let e = y[0] - self.params.d * x[0] * x[0];
-        self.log_norm_r - self.half_inv_r * e * e
+        self.log_observation_density(x[0], y[0])
     }
 
     #[inline(always)]
     fn log_observations(&self, _t: usize, _u: &[f64], y: &[f64], states: &[f64], out: &mut [f64]) {
         for (lg, &x) in out.iter_mut().zip(states) {
-            let e = y[0] - self.params.d * x * x;
-            *lg = self.log_norm_r - self.half_inv_r * e * e;
+            *lg = self.log_observation_density(x, y[0]);
         }
     }
 }
@@ -232,8 +244,7 @@ impl ObservationDensity for Nlbench {
 impl TransitionDensity for Nlbench {
     #[inline]
     fn log_transition(&self, t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
-        let e = next[0] - self.mean(x[0], self.forcing(t));
-        self.log_norm_q - self.half_inv_q * e * e
+        self.log_transition_density(self.mean(x[0], self.forcing(t)), next[0])
     }
 
     fn log_transition_at<'a>(
@@ -242,10 +253,7 @@ impl TransitionDensity for Nlbench {
         _u: &'a [f64],
     ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
         let forcing = self.forcing(t);
-        move |x, next| {
-            let e = next[0] - self.mean(x[0], forcing);
-            self.log_norm_q - self.half_inv_q * e * e
-        }
+        move |x, next| self.log_transition_density(self.mean(x[0], forcing), next[0])
     }
 
     #[inline]
@@ -264,8 +272,7 @@ impl TransitionDensity for Nlbench {
         let m = from.len();
         for (row, &next) in out.chunks_exact_mut(m).zip(to) {
             for (value, &mean) in row.iter_mut().zip(scratch.iter()) {
-                let e = next - mean;
-                *value = self.log_norm_q - self.half_inv_q * e * e;
+                *value = self.log_transition_density(mean, next);
             }
         }
     }

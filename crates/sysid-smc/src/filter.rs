@@ -222,7 +222,7 @@ impl ParticleFilter {
             self.propagate_and_weigh(model, data, t);
             let increment = self.reweight(t, data.is_missing(t))?;
             loglik += increment;
-            self.record(t, n);
+            self.record(n);
             if t + 1 < steps {
                 let ess = *self.ess.last().expect("recorded");
                 if self.options.ess_threshold >= 1.0 || ess < self.options.ess_threshold * m as f64
@@ -350,7 +350,7 @@ impl ParticleFilter {
 
     #[inline(always)]
     /// Stores the filtered mean, the ESS and (optionally) the history of step `t`.
-    fn record(&mut self, _t: usize, n: usize) {
+    fn record(&mut self, n: usize) {
         let start = self.means.len();
         self.means.resize(start + n, 0.0);
         weighted_mean(&self.states, &self.weights, &mut self.means[start..]);

@@ -77,20 +77,14 @@ pub struct ResampleScratch {
 }
 
 /// Assigns sorted positions (in units of the total weight) to ancestors by one merge of
-/// the positions with the cumulative weights. The merge is branch-free (each step
-/// either advances the particle or emits an ancestor), so its cost does not depend on
-/// how predictable the weights are.
+/// the positions with the cumulative weights, O(N + M).
 #[inline]
 fn assign_sorted(weights: &[f64], positions: impl Iterator<Item = f64>, out: &mut [usize]) {
     let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
     let mut i = 0;
     let mut upper = weights[0];
     for (slot, p) in out.iter_mut().zip(positions) {
-        loop {
-            let advance = upper <= p && i < last;
-            if !advance {
-                break;
-            }
+        while upper <= p && i < last {
             i += 1;
             upper += weights[i];
         }

@@ -8,12 +8,14 @@
 //! above 709 give the value at 709 (callers pass shifted log-weights, which are <= 0).
 //!
 //! The same source is compiled for AVX-512, for AVX2+FMA and for the baseline target;
-//! the best one is picked at run time. Every lane uses the same fused operations in the
+//! the best one is picked at run time by [`dispatch`]. Every lane uses the same fused operations in the
 //! same order, so the three versions give bit-identical results (the baseline's
 //! `mul_add` is a correctly rounded `fma`), and a seed reproduces a run on any x86-64.
 //!
 //! # Complexity
 //! About 20 vector instructions per 4 (AVX2) or 8 (AVX-512) values.
+
+use crate::simd::{Kernel, dispatch};
 
 const LOG2_E: f64 = std::f64::consts::LOG2_E;
 /// `ln 2` rounded to 32 significant bits, so that `k * LN2_HI` is exact.
@@ -79,16 +81,19 @@ fn exp_shifted_sum_kernel(v: &mut [f64], shift: f64) -> f64 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-fn exp_shifted_sum_avx512(v: &mut [f64], shift: f64) -> f64 {
-    exp_shifted_sum_kernel(v, shift)
+/// The kernel as a [`Kernel`] for [`dispatch`].
+struct ExpShiftedSum<'a> {
+    values: &'a mut [f64],
+    shift: f64,
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn exp_shifted_sum_avx2(v: &mut [f64], shift: f64) -> f64 {
-    exp_shifted_sum_kernel(v, shift)
+impl Kernel for ExpShiftedSum<'_> {
+    type Output = f64;
+
+    #[inline(always)]
+    fn run(self) -> f64 {
+        exp_shifted_sum_kernel(self.values, self.shift)
+    }
 }
 
 /// Replaces every `v[i]` by `exp(v[i] - shift)` and returns their sum.
@@ -104,19 +109,7 @@ fn exp_shifted_sum_avx2(v: &mut [f64], shift: f64) -> f64 {
 /// assert!((sum - (1.0 + (-1.0f64).exp() + (-2.0f64).exp())).abs() < 1e-15);
 /// ```
 pub fn exp_shifted_sum(v: &mut [f64], shift: f64) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU supports AVX-512F, checked just above.
-            return unsafe { exp_shifted_sum_avx512(v, shift) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-            return unsafe { exp_shifted_sum_avx2(v, shift) };
-        }
-    }
-    exp_shifted_sum_kernel(v, shift)
+    dispatch(ExpShiftedSum { values: v, shift })
 }
 
 /// The portable version, for tests that compare the dispatched kernels with it.

@@ -4,6 +4,7 @@
 use rand::RngExt;
 use rayon::prelude::*;
 
+use super::paths::feed_step;
 use super::{SmootherStats, Trajectories};
 use crate::streams::{Rng, stream};
 use crate::weights::{DrawFailure, find_cumulative};
@@ -173,11 +174,7 @@ where
             block,
             seed,
             &mut step,
-            &mut |t, states, next| {
-                for (k, x) in states.chunks_exact(n).enumerate() {
-                    functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
-                }
-            },
+            &mut |t, states, next| feed_step(functional, t, states, next, n, weight),
         )?;
     }
     Ok(step.stats())

@@ -88,12 +88,9 @@ impl Trajectories {
     /// `1 / K`, giving the smoothed sum `E[sum_t s(t, x_t, x_{t+1}) | y]`.
     pub fn accumulate<F: AdditiveFunctional + ?Sized>(&self, functional: &mut F) {
         let weight = 1.0 / self.paths as f64;
-        let n = self.state_dim;
         for t in 0..self.steps {
             let next = (t + 1 < self.steps).then(|| self.states(t + 1));
-            for (k, x) in self.states(t).chunks_exact(n).enumerate() {
-                functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
-            }
+            feed_step(functional, t, self.states(t), next, self.state_dim, weight);
         }
     }
 
@@ -112,6 +109,21 @@ impl Trajectories {
             }
         }
         out
+    }
+}
+
+/// Adds the pairs `(x_t^k, x_{t+1}^k)` of one step of several paths (path-major
+/// states, stride `n`; `next` is `None` at the last step) to a functional.
+pub(crate) fn feed_step<F: AdditiveFunctional + ?Sized>(
+    functional: &mut F,
+    t: usize,
+    states: &[f64],
+    next: Option<&[f64]>,
+    n: usize,
+    weight: f64,
+) {
+    for (k, x) in states.chunks_exact(n).enumerate() {
+        functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
     }
 }
 

@@ -31,15 +31,15 @@ fn main() {
         .unwrap()
     };
     if what == "pf" || what == "all" {
-        for m in [1000usize, 10000] {
-            let mut pf = filter(m, false);
+        for (m, history) in [(50usize, true), (1000, false), (10000, false)] {
+            let mut pf = filter(m, history);
             let ms = median(
                 |r| {
                     pf.run(&model, &data, r).unwrap();
                 },
                 15,
             );
-            println!("pf M={m}: {ms:.3} ms");
+            println!("pf M={m} (history {history}): {ms:.3} ms");
         }
     }
     if what == "tanizaki" || what == "all" {

@@ -242,3 +242,45 @@ fn particle_em_on_lgss_reaches_the_exact_em_estimate() {
     }
     let _ = affine.smc_model(&current).unwrap();
 }
+
+/// The batched per-step accumulation (what the smoothers call) equals adding the paths
+/// one at a time, on three made-up paths through a simulated record.
+#[test]
+fn batched_statistics_equal_per_path_statistics() {
+    let steps = 60;
+    let sim = Nlbench::truth().simulate(steps, 5);
+    let mut outputs = sim.outputs.clone();
+    outputs[7] = f64::NAN; // a missing output: the output block skips t = 7
+    let data = Series::new(&outputs, 1).unwrap();
+    let model = NlbenchAffine;
+    let path = |k: usize, t: usize| sim.states[t] + 0.3 * k as f64 - 0.2 * (t % 3) as f64;
+    let mut batched = StatisticsCollector::new(&model, &data);
+    let mut single = StatisticsCollector::new(&model, &data);
+    let weight = 1.0 / 3.0;
+    for t in 0..steps {
+        let states: Vec<f64> = (0..3).map(|k| path(k, t)).collect();
+        let next: Option<Vec<f64>> =
+            (t + 1 < steps).then(|| (0..3).map(|k| path(k, t + 1)).collect());
+        batched.add_step(t, &states, next.as_deref(), 1, weight);
+        for k in 0..3 {
+            single.add(
+                t,
+                &states[k..k + 1],
+                next.as_ref().map(|n| &n[k..k + 1]),
+                weight,
+            );
+        }
+    }
+    let (b, s) = (batched.finish(), single.finish());
+    let close = |x: &DMatrix<f64>, y: &DMatrix<f64>| {
+        x.iter()
+            .zip(y.iter())
+            .all(|(p, q)| (p - q).abs() <= 1e-12 * (1.0 + q.abs()))
+    };
+    assert!(close(&b.state, &s.state), "{} vs {}", b.state, s.state);
+    assert!(close(&b.output, &s.output), "{} vs {}", b.output, s.output);
+    assert!((b.state_steps - (steps - 1) as f64).abs() < 1e-12);
+    assert!((b.output_steps - (steps - 1) as f64).abs() < 1e-12);
+    assert!((b.output_steps - s.output_steps).abs() < 1e-12);
+    assert!(close(&b.initial_second_moment, &s.initial_second_moment));
+}

@@ -81,6 +81,10 @@ enum Runner {
         /// Replace an existing trace file.
         #[arg(long)]
         force: bool,
+        /// Noise variances q, r: `known` (the paper: only a, b, c, d estimated) or
+        /// `estimated` (q and r start at 10 times their true values and are estimated).
+        #[arg(long, default_value = "known")]
+        noise: String,
     },
     /// Merges the outputs of `nlbench-em` shards into one set of run lines and summary.
     NlbenchEmMerge {
@@ -124,6 +128,7 @@ fn main() {
             shard,
             trace_out,
             force,
+            noise,
         } => {
             let parsed = shard
                 .split_once('/')
@@ -141,6 +146,7 @@ fn main() {
                 shard,
                 trace_out,
                 force,
+                noise,
             };
             nlbench_em::run(&args).unwrap_or_else(|e| exit_with(&e));
         }

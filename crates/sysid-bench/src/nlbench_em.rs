@@ -15,7 +15,7 @@ use sysid::em::affine::{AffineEm, AffineEmSpec, AffineParams};
 use sysid::em::linear::Covariance;
 use sysid::em::{EmObserver, EmOptions, IterationInfo, run_em};
 use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
-use sysid::smc::{FfbsiReject, Series, Smoother, Tanizaki, stream};
+use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki, stream};
 
 /// The runner's settings.
 pub struct Args {
@@ -28,7 +28,16 @@ pub struct Args {
     pub shard: (usize, usize),
     pub trace_out: Option<std::path::PathBuf>,
     pub force: bool,
+    /// `known` or `estimated` noise variances.
+    pub noise: String,
 }
+
+/// Particles of the reference filter that scores the truth and the final estimate.
+const REFERENCE_PARTICLES: usize = 10_000;
+
+/// A final estimate counts as reaching the truth's likelihood when its reference
+/// log-likelihood is at most this many nats below the truth's.
+const REFERENCE_SLACK: f64 = 10.0;
 
 /// One run's result.
 struct RunResult {
@@ -38,6 +47,11 @@ struct RunResult {
     iterations: usize,
     decreases: usize,
     final_loglik: f64,
+    /// Reference log-likelihoods (a large-M filter on the run's data) at the truth and
+    /// at the final estimate, to tell a poor data set from a poor EM run.
+    reference_truth: Option<f64>,
+    reference_start: Option<f64>,
+    reference_final: Option<f64>,
     seconds: f64,
     /// (a, b, c, d) after each iteration
     trace: Vec<[f64; 4]>,
@@ -72,17 +86,30 @@ fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<Ru
     let mut rng = stream(seed_of(1), 0);
     let mut factor = || rng.random_range(0.5..1.5);
     let truth = NlbenchParams::TRUE;
-    let start = NlbenchParams {
+    let mut start = NlbenchParams {
         a: truth.a * factor(),
         b: truth.b * factor(),
         c: truth.c * factor(),
         d: truth.d * factor(),
         ..truth
     };
-    // q and r known (ALGORITHMS.md 3): only a, b, c, d are estimated.
+    let (pi_x, pi_y) = match a.noise.as_str() {
+        "estimated" => {
+            // A deliberately loose start: EM shrinks q and r as the fit improves.
+            start.q = 10.0 * truth.q;
+            start.r = 10.0 * truth.r;
+            (Covariance::Diagonal, Covariance::Diagonal)
+        }
+        "q" => {
+            start.q = 100.0 * truth.q;
+            (Covariance::Diagonal, Covariance::Fixed)
+        }
+        // q and r known (ALGORITHMS.md 3): only a, b, c, d are estimated.
+        _ => (Covariance::Fixed, Covariance::Fixed),
+    };
     let spec = AffineEmSpec {
-        pi_x: Covariance::Fixed,
-        pi_y: Covariance::Fixed,
+        pi_x,
+        pi_y,
         ..AffineEmSpec::default()
     };
     let model = NlbenchAffine;
@@ -97,10 +124,27 @@ fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<Ru
     .map_err(|e| e.to_string())?;
     let mut trace = Trace(Vec::with_capacity(a.iters));
     let result = run_em(&mut em, NlbenchAffine::params(&start), &options, &mut trace);
+    let estimate = NlbenchAffine::nlbench_params(&result.estimate);
+    let reference_data = Series::new(&sim.outputs, 1).map_err(|e| e.to_string())?;
+    let reference = |params: NlbenchParams| -> Option<f64> {
+        let model = Nlbench::new(params).ok()?;
+        let mut filter = ParticleFilter::new(FilterOptions {
+            particles: REFERENCE_PARTICLES,
+            ..FilterOptions::default()
+        })
+        .ok()?;
+        filter
+            .run(&model, &reference_data, seed_of(2))
+            .ok()
+            .map(|s| s.loglik)
+    };
     Ok(RunResult {
         run,
         start,
-        estimate: NlbenchAffine::nlbench_params(&result.estimate),
+        estimate,
+        reference_truth: reference(truth),
+        reference_start: reference(start),
+        reference_final: reference(estimate),
         iterations: result.iterations,
         decreases: result.decreases,
         final_loglik: result.loglik.unwrap_or(f64::NAN),
@@ -117,6 +161,9 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 /// Runs the study and prints JSON lines.
 pub fn run(a: &Args) -> Result<(), String> {
+    if !["known", "estimated", "q"].contains(&a.noise.as_str()) {
+        return Err(format!("--noise {:?}: use known or estimated", a.noise));
+    }
     if a.runs == 0 || a.iters == 0 || a.particles == 0 || a.steps < 2 {
         return Err("--runs, --iters and --particles must be >= 1 and --steps >= 2".into());
     }
@@ -155,16 +202,19 @@ pub fn run(a: &Args) -> Result<(), String> {
         .collect();
     let results: Vec<RunResult> = results.into_iter().collect::<Result<_, _>>()?;
     let params = json!({"T": a.steps, "M": a.particles, "iters": a.iters, "runs": a.runs,
-        "smoother": a.smoother, "seed": a.seed, "shard": format!("{index}/{count}")});
+        "smoother": a.smoother, "seed": a.seed, "noise": a.noise, "shard": format!("{index}/{count}")});
     for r in &results {
         let [sa, sb, sc, sd] = abcd(&r.start);
         let [ea, eb, ec, ed] = abcd(&r.estimate);
         emit(&json!({
             "task": "nlbench_em_run", "params": params, "run": r.run,
             "start": {"a": sa, "b": sb, "c": sc, "d": sd},
-            "estimate": {"a": ea, "b": eb, "c": ec, "d": ed},
+            "estimate": {"a": ea, "b": eb, "c": ec, "d": ed, "q": r.estimate.q, "r": r.estimate.r},
             "converged": converged(&r.estimate), "iterations": r.iterations,
             "likelihood_decreases": r.decreases, "final_loglik": r.final_loglik,
+            "reference_loglik": {"truth": r.reference_truth, "start": r.reference_start,
+                "final": r.reference_final,
+                "particles": REFERENCE_PARTICLES},
             "seconds": r.seconds,
         }));
     }
@@ -184,7 +234,16 @@ pub fn run(a: &Args) -> Result<(), String> {
     }
     let estimates: Vec<NlbenchParams> = results.iter().map(|r| r.estimate).collect();
     let seconds: Vec<f64> = results.iter().map(|r| r.seconds).collect();
-    let mut summary = summary_json(&params, &estimates, &seconds);
+    let references: Vec<(f64, f64)> = results
+        .iter()
+        .map(|r| {
+            (
+                r.reference_truth.unwrap_or(f64::NAN),
+                r.reference_final.unwrap_or(f64::NAN),
+            )
+        })
+        .collect();
+    let mut summary = summary_json(&params, &estimates, &references, &seconds);
     summary["wall_seconds"] = json!(started.elapsed().as_secs_f64());
     summary["threads"] = json!(rayon::current_num_threads());
     emit(&summary);
@@ -197,8 +256,13 @@ pub fn run(a: &Args) -> Result<(), String> {
 fn summary_json(
     params: &serde_json::Value,
     estimates: &[NlbenchParams],
+    references: &[(f64, f64)],
     seconds: &[f64],
 ) -> serde_json::Value {
+    // How far each final estimate's likelihood falls below the truth's.
+    let mut gaps: Vec<f64> = references.iter().map(|(t, f)| t - f).collect();
+    gaps.sort_by(f64::total_cmp);
+    let near_truth = gaps.iter().filter(|&&g| g <= REFERENCE_SLACK).count();
     let converged_count = estimates.iter().filter(|p| converged(p)).count();
     let summary_of = |f: fn(&NlbenchParams) -> f64| {
         let mut v: Vec<f64> = estimates.iter().map(f).collect();
@@ -214,6 +278,10 @@ fn summary_json(
         "a": summary_of(|p| p.a), "b": summary_of(|p| p.b),
         "c": summary_of(|p| p.c), "d": summary_of(|p| p.d),
         "seconds_per_run_median": quantile(&seconds, 0.5),
+        "reference": {"particles": REFERENCE_PARTICLES, "slack_nats": REFERENCE_SLACK,
+            "final_within_slack_of_truth": near_truth,
+            "gap_truth_minus_final": {"median": quantile(&gaps, 0.5),
+                "q25": quantile(&gaps, 0.25), "q75": quantile(&gaps, 0.75)}},
     })
 }
 
@@ -250,6 +318,12 @@ pub fn merge(files: &[std::path::PathBuf]) -> Result<(), String> {
             ..NlbenchParams::TRUE
         })
         .collect();
+    let reference =
+        |v: &serde_json::Value, k: &str| v["reference_loglik"][k].as_f64().unwrap_or(f64::NAN);
+    let references: Vec<(f64, f64)> = runs
+        .values()
+        .map(|v| (reference(v, "truth"), reference(v, "final")))
+        .collect();
     let seconds: Vec<f64> = runs
         .values()
         .map(|v| v["seconds"].as_f64().unwrap_or(f64::NAN))
@@ -257,6 +331,6 @@ pub fn merge(files: &[std::path::PathBuf]) -> Result<(), String> {
     for v in runs.values() {
         emit(v);
     }
-    emit(&summary_json(&params, &estimates, &seconds));
+    emit(&summary_json(&params, &estimates, &references, &seconds));
     Ok(())
 }

@@ -72,12 +72,18 @@ impl AffineModel for NlbenchAffine {
     }
 
     #[inline]
-    fn regressors(&self, t: usize, x: &[f64], _u: &[f64], out: &mut [f64]) {
-        let x = x[0];
-        out[0] = x;
-        out[1] = x / (1.0 + x * x);
-        out[2] = (1.2 * (t as f64 + 1.0)).cos();
-        out[3] = x * x;
+    fn regressors(&self, t: usize, x: &[f64], u: &[f64], out: &mut [f64]) {
+        self.regressors_batch(t, x, u, out);
+    }
+
+    fn regressors_batch(&self, t: usize, states: &[f64], _u: &[f64], out: &mut [f64]) {
+        let forcing = (1.2 * (t as f64 + 1.0)).cos();
+        for (&x, alpha) in states.iter().zip(out.chunks_exact_mut(4)) {
+            alpha[0] = x;
+            alpha[1] = x / (1.0 + x * x);
+            alpha[2] = forcing;
+            alpha[3] = x * x;
+        }
     }
 
     fn state_structure(&self) -> Vec<Vec<usize>> {

@@ -256,7 +256,7 @@ impl TransitionDensity for Nlbench {
         move |x, next| self.log_transition_density(self.mean(x[0], forcing), next[0])
     }
 
-    #[inline]
+    #[inline(always)]
     fn log_transition_matrix(
         &self,
         t: usize,

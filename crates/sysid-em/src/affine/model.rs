@@ -47,6 +47,17 @@ pub trait AffineModel: Sync {
     /// Writes `alpha(x_t, u_t, t)` into `out`.
     fn regressors(&self, t: usize, x: &[f64], u: &[f64], out: &mut [f64]);
 
+    /// Writes the regressors of several states at step `t` (path-major, stride
+    /// `state_dim`) into `out` (stride `regressor_dim`). The default calls
+    /// [`regressors`](Self::regressors) per state; models override it to compute the
+    /// time-dependent terms once.
+    fn regressors_batch(&self, t: usize, states: &[f64], u: &[f64], out: &mut [f64]) {
+        let (n, r) = (self.state_dim(), self.regressor_dim());
+        for (x, alpha) in states.chunks_exact(n).zip(out.chunks_exact_mut(r)) {
+            self.regressors(t, x, u, alpha);
+        }
+    }
+
     /// The regressors each state row uses (default: all).
     fn state_structure(&self) -> Vec<Vec<usize>> {
         vec![(0..self.regressor_dim()).collect(); self.state_dim()]

@@ -52,26 +52,40 @@ impl AffineStatistics {
     }
 }
 
-/// Adds `weight * v v'` to the upper triangle of `m`.
+/// `sum_k a_k b_k` with four interleaved partial sums (so the compiler vectorises it).
 #[inline]
-fn add_outer_upper(m: &mut DMatrix<f64>, v: &[f64], weight: f64) {
-    let k = v.len();
-    for j in 0..k {
-        let wj = weight * v[j];
-        let column = &mut m.as_mut_slice()[j * k..j * k + j + 1];
-        for (c, &vi) in column.iter_mut().zip(v) {
-            *c += wj * vi;
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for i in 0..4 {
+            acc[i] += x[i] * y[i];
         }
     }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Feeds smoothed pairs `(x_t, x_{t+1})` into [`AffineStatistics`].
+///
+/// Per step it sums the outer products of `[alpha; x_{t+1}]` over the paths once and
+/// derives the output block from the same sums (`alpha alpha'` is shared; the output
+/// `y_t` is the same on every path), then adds the step's totals times the weight.
 pub struct StatisticsCollector<'a, A> {
     model: &'a A,
     data: &'a Series<'a>,
     stats: AffineStatistics,
-    state_vector: Vec<f64>,
-    output_vector: Vec<f64>,
+    alphas: Vec<f64>,
+    /// The step's `[alpha; x_{t+1}]` by component: column `i` holds component `i` of
+    /// every path.
+    columns: Vec<f64>,
+    step_sum: Vec<f64>,
+    alpha_sum: Vec<f64>,
 }
 
 impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
@@ -82,8 +96,10 @@ impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
             model,
             data,
             stats: AffineStatistics::zeros(r, n, p),
-            state_vector: vec![0.0; r + n],
-            output_vector: vec![0.0; r + p],
+            alphas: Vec::new(),
+            columns: Vec::new(),
+            step_sum: vec![0.0; (r + n) * (r + n)],
+            alpha_sum: vec![0.0; r],
         }
     }
 
@@ -96,30 +112,87 @@ impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
 
 impl<A: AffineModel> AdditiveFunctional for StatisticsCollector<'_, A> {
     fn add(&mut self, t: usize, x: &[f64], next: Option<&[f64]>, weight: f64) {
-        let r = self.model.regressor_dim();
-        let u = self.data.input(t);
-        self.model.regressors(t, x, u, &mut self.state_vector[..r]);
-        if t == 0 {
-            let s = &mut self.stats;
-            for (i, &xi) in x.iter().enumerate() {
-                s.initial_mean[i] += weight * xi;
-                for (j, &xj) in x.iter().enumerate() {
-                    s.initial_second_moment[(i, j)] += weight * xi * xj;
+        self.add_step(t, x, next, x.len(), weight);
+    }
+
+    fn add_step(
+        &mut self,
+        t: usize,
+        states: &[f64],
+        next: Option<&[f64]>,
+        state_dim: usize,
+        weight: f64,
+    ) {
+        let (r, n) = (self.model.regressor_dim(), state_dim);
+        let paths = states.len() / n;
+        self.alphas.resize(paths * r, 0.0);
+        self.model
+            .regressors_batch(t, states, self.data.input(t), &mut self.alphas);
+        // Sums over the paths of [alpha; x_{t+1}][alpha; x_{t+1}]' (alpha alpha' alone
+        // at the last step) and of alpha.
+        let k = if next.is_some() { r + n } else { r };
+        self.columns.resize(k * paths, 0.0);
+        for (path, alpha) in self.alphas.chunks_exact(r).enumerate() {
+            for (i, &a) in alpha.iter().enumerate() {
+                self.columns[i * paths + path] = a;
+            }
+        }
+        if let Some(next) = next {
+            for (path, x) in next.chunks_exact(n).enumerate() {
+                for (i, &v) in x.iter().enumerate() {
+                    self.columns[(r + i) * paths + path] = v;
                 }
             }
         }
+        let columns: Vec<&[f64]> = self.columns.chunks_exact(paths).collect();
+        for j in 0..k {
+            for i in 0..=j {
+                self.step_sum[j * k + i] = dot(columns[i], columns[j]);
+            }
+        }
+        for (s, column) in self.alpha_sum.iter_mut().zip(&columns) {
+            *s = column.iter().sum();
+        }
+        let total_weight = weight * paths as f64;
+        if t == 0 {
+            let s = &mut self.stats;
+            for x in states.chunks_exact(n) {
+                for (i, &xi) in x.iter().enumerate() {
+                    s.initial_mean[i] += weight * xi;
+                    for (j, &xj) in x.iter().enumerate() {
+                        s.initial_second_moment[(i, j)] += weight * xi * xj;
+                    }
+                }
+            }
+        }
+        if next.is_some() {
+            let state = self.stats.state.as_mut_slice();
+            for (m, &v) in state.iter_mut().zip(&self.step_sum[..k * k]) {
+                *m += weight * v;
+            }
+            self.stats.state_steps += total_weight;
+        }
         let y = self.data.output(t);
         if !y.iter().any(|v| v.is_nan()) {
-            let (alpha, rest) = self.output_vector.split_at_mut(r);
-            alpha.copy_from_slice(&self.state_vector[..r]);
-            rest.copy_from_slice(y);
-            add_outer_upper(&mut self.stats.output, &self.output_vector, weight);
-            self.stats.output_steps += weight;
-        }
-        if let Some(next) = next {
-            self.state_vector[r..].copy_from_slice(next);
-            add_outer_upper(&mut self.stats.state, &self.state_vector, weight);
-            self.stats.state_steps += weight;
+            // [alpha; y] block: alpha alpha' from the step sums, alpha y' = (sum alpha) y',
+            // y y' once per path.
+            let out_k = r + y.len();
+            let output = self.stats.output.as_mut_slice();
+            for j in 0..r {
+                for i in 0..=j {
+                    output[j * out_k + i] += weight * self.step_sum[j * k + i];
+                }
+            }
+            for (jy, &yj) in y.iter().enumerate() {
+                let column = &mut output[(r + jy) * out_k..(r + jy + 1) * out_k];
+                for (c, &a) in column[..r].iter_mut().zip(&self.alpha_sum) {
+                    *c += weight * a * yj;
+                }
+                for (c, &yi) in column[r..=r + jy].iter_mut().zip(y) {
+                    *c += total_weight * yi * yj;
+                }
+            }
+            self.stats.output_steps += total_weight;
         }
     }
 }

@@ -122,9 +122,7 @@ pub(crate) fn feed_step<F: AdditiveFunctional + ?Sized>(
     n: usize,
     weight: f64,
 ) {
-    for (k, x) in states.chunks_exact(n).enumerate() {
-        functional.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
-    }
+    functional.add_step(t, states, next, n, weight);
 }
 
 /// A sum over time of `s(t, x_t, x_{t+1})`, smoothed: the smoothers call
@@ -138,6 +136,24 @@ pub(crate) fn feed_step<F: AdditiveFunctional + ?Sized>(
 pub trait AdditiveFunctional {
     /// Adds `weight * s(t, x, next)`.
     fn add(&mut self, t: usize, x: &[f64], next: Option<&[f64]>, weight: f64);
+
+    /// Adds `weight * s(t, x^k, next^k)` for the states of several paths at one step
+    /// (path-major, stride `state_dim`; `next` likewise). The smoothers call this; the
+    /// default calls [`add`](Self::add) per path, and functionals override it to do
+    /// per-step work once.
+    fn add_step(
+        &mut self,
+        t: usize,
+        states: &[f64],
+        next: Option<&[f64]>,
+        state_dim: usize,
+        weight: f64,
+    ) {
+        let n = state_dim;
+        for (k, x) in states.chunks_exact(n).enumerate() {
+            self.add(t, x, next.map(|s| &s[k * n..(k + 1) * n]), weight);
+        }
+    }
 }
 
 impl<F: FnMut(usize, &[f64], Option<&[f64]>, f64)> AdditiveFunctional for F {

@@ -76,6 +76,11 @@ pub enum CliError {
         context: String,
         source: sysid::smc::SmcError,
     },
+    #[error("{context}: {source}")]
+    AffineEm {
+        context: String,
+        source: sysid::em::affine::AffineEmError,
+    },
     #[error("the data have {found} {what} columns but the model has {expected}")]
     ColumnCount {
         what: &'static str,

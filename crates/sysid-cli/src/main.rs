@@ -97,6 +97,15 @@ pub fn say(line: &str) {
     }
 }
 
+/// Prints a command's summary: `value` as one JSON line under `--json`, else `text`.
+pub fn report(json: bool, value: serde_json::Value, text: impl FnOnce() -> String) {
+    if json {
+        say(&value.to_string());
+    } else {
+        say(&text());
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {

@@ -2,9 +2,8 @@ use super::fix::{apply, parse_fix};
 use super::n4sid::parse_order;
 use crate::DataArgs;
 use crate::error::CliError;
-use crate::files::{create_output, read_model, write_output};
+use crate::files::{read_model, write_output};
 use nalgebra::DVector;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use sysid::em::linear::{LinearEmSpec, fit};
 use sysid::em::{EmOptions, Termination};
@@ -14,7 +13,9 @@ use sysid::subspace::{N4sidOptions, Order, n4sid};
 /// Options of `sysid fit`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// Model class: `lti` (linear Gaussian state space, exact EM).
+    /// Model class: `lti` (linear Gaussian state space, exact EM), `nlbench` (the
+    /// seed-000 benchmark, particle EM) or `affine` (particle EM for an affine model:
+    /// `--system nlbench`, or a linear model given by `--init FILE`).
     pub kind: String,
     #[command(flatten)]
     pub data: DataArgs,
@@ -22,8 +23,14 @@ pub struct Options {
     #[arg(long)]
     pub order: Option<String>,
     /// Starting model: `n4sid` (subspace fit; its S is set to zero) or a model file.
+    /// For `nlbench`: `a,b,c,d` or `a,b,c,d,q,r` (default: the nominal values
+    /// 0.5,25,8,0.05,0.01,0.1).
     #[arg(long, default_value = "n4sid")]
     pub init: String,
+    /// `fit affine`: the affine system (`nlbench`); without it `--init` names a linear
+    /// model file.
+    #[arg(long)]
+    pub system: Option<String>,
     /// Hold a matrix fixed: `NAME` at its initial value, or `NAME=VALUE` with a number
     /// (broadcast) or a JSON matrix. Names: A B C D h Q R S mu P1. Repeatable.
     #[arg(long, value_name = "NAME[=VALUE]")]
@@ -32,9 +39,23 @@ pub struct Options {
     /// initial value is replaced by its diagonal.
     #[arg(long, value_delimiter = ',')]
     pub diag: Vec<String>,
-    /// Maximum number of EM iterations.
-    #[arg(long, default_value_t = 500)]
+    /// Maximum number of EM iterations (particle EM runs exactly this many).
+    #[arg(long, visible_alias = "iters", default_value_t = 500)]
     pub max_iter: usize,
+    /// Particle EM: particles M of the filter (and paths of `ffbsi-reject`).
+    #[arg(long, default_value_t = 100)]
+    pub particles: usize,
+    /// Particle EM: E-step smoother, `tanizaki` (seed 000's, O(M^2) per step) or
+    /// `ffbsi-reject` (O(M) expected per step when the transition density is not too
+    /// peaked).
+    #[arg(long, default_value = "tanizaki")]
+    pub smoother: String,
+    /// Particle EM: seed of the random streams (same seed, same result, any machine).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Particle EM: also estimate the noise covariances (else held at their start).
+    #[arg(long)]
+    pub estimate_noise: bool,
     /// Stopping tolerance on the relative log-likelihood change.
     #[arg(long, default_value_t = 1e-6)]
     pub tol: f64,
@@ -100,11 +121,28 @@ fn initial_model(
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
-    if !o.kind.eq_ignore_ascii_case("lti") {
-        return Err(CliError::BadOption {
-            option: "fit",
-            message: format!("unknown model class {:?} (known: lti)", o.kind),
-        });
+    match o.kind.to_ascii_lowercase().as_str() {
+        "lti" => {}
+        "nlbench" => return super::fit_affine::run(o, true),
+        "affine" => {
+            return match o.system.as_deref() {
+                None => super::fit_affine::run(o, false),
+                Some("nlbench") => super::fit_affine::run(o, true),
+                Some(other) => Err(CliError::UnknownSystem {
+                    name: other.into(),
+                    known: "nlbench (or give a linear model with --init FILE)".into(),
+                }),
+            };
+        }
+        _ => {
+            return Err(CliError::BadOption {
+                option: "fit",
+                message: format!(
+                    "unknown model class {:?} (known: lti, nlbench, affine)",
+                    o.kind
+                ),
+            });
+        }
     }
     let fixes = o
         .fix
@@ -144,34 +182,28 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         serde_json::to_string_pretty(&ModelSpec::from_model(&result.estimate)).expect("serialises");
     write_output(&o.out, o.force, &(text + "\n"))?;
     if let Some(path) = &o.trace {
-        let mut w = create_output(path, o.force)?;
-        let io = |source| CliError::Io {
-            path: path.clone(),
-            source,
-        };
-        writeln!(w, "iteration,loglik").map_err(io)?;
+        let mut text = String::from("iteration,loglik\n");
         for (k, l) in result.trace.iter().enumerate() {
-            writeln!(w, "{k},{l}").map_err(io)?;
+            text += &format!("{k},{l}\n");
         }
-        w.flush().map_err(io)?;
+        write_output(path, o.force, &text)?;
     }
     let loglik = result.loglik.unwrap_or(f64::NEG_INFINITY);
-    if o.json {
-        crate::say(
-            &serde_json::json!({
-                "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
-                "termination": stop, "seconds": result.elapsed.as_secs_f64(), "out": o.out,
-            })
-            .to_string(),
-        );
-    } else {
-        crate::say(&format!(
-            "loglik {loglik} after {} iterations ({stop}, {:.2} s); wrote {}",
-            result.iterations,
-            result.elapsed.as_secs_f64(),
-            o.out.display()
-        ));
-    }
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
+            "termination": stop, "seconds": result.elapsed.as_secs_f64(), "out": o.out,
+        }),
+        || {
+            format!(
+                "loglik {loglik} after {} iterations ({stop}, {:.2} s); wrote {}",
+                result.iterations,
+                result.elapsed.as_secs_f64(),
+                o.out.display()
+            )
+        },
+    );
     if let Termination::LikelihoodDecreased {
         iteration,
         previous,

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod fit;
+pub mod fit_affine;
 pub mod fix;
 pub mod loglik;
 pub mod n4sid;

@@ -226,7 +226,7 @@ fn filter_with<M: FilterModel + Sync>(
     Ok(())
 }
 
-fn series_of<'a>(file: &'a DataFile, context: &str) -> Result<Series<'a>, CliError> {
+pub(crate) fn series_of<'a>(file: &'a DataFile, context: &str) -> Result<Series<'a>, CliError> {
     let y = &file.record.y;
     let u = &file.record.u;
     Series::new(y.as_slice(), y.nrows())

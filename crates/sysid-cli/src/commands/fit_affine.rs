@@ -1,0 +1,313 @@
+//! `sysid fit nlbench` and `sysid fit affine`: particle EM (seed 000) for the models
+//! affine in their parameters that `sysid-models` provides.
+//!
+//! - `fit nlbench` (= `fit affine --system nlbench`): the seed-000 benchmark; `--init
+//!   a,b,c,d[,q,r]` (default: the benchmark's nominal values). q and r are held at their
+//!   starting values unless `--estimate-noise`.
+//! - `fit affine --init model.json`: a linear Gaussian model (no inputs, offset or S) in
+//!   affine form; A, C, Q and R are estimated by particle EM (the exact answer is
+//!   `fit lti`; this is the check of the particle machinery on real data).
+//!
+//! Particle EM runs a fixed number of iterations (`--max-iter`, alias `--iters`); the
+//! E-step's log-likelihood is a particle estimate, so decreases are counted, not errors.
+
+use super::fit::Options;
+use super::particle::series_of;
+use crate::error::CliError;
+use crate::files::{DataFile, read_model, write_output};
+use std::path::Path;
+use sysid::em::affine::{AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams};
+use sysid::em::linear::Covariance;
+use sysid::em::{EmObserver, EmOptions, IterationInfo, Termination, run_em};
+use sysid::kalman::ModelSpec;
+use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
+use sysid::smc::{FfbsiReject, Smoother, Tanizaki};
+
+/// The affine model chosen on the command line, with its starting parameters.
+enum Chosen {
+    Nlbench(AffineParams),
+    Linear(LinearAffine, AffineParams),
+}
+
+fn bad(option: &'static str, message: impl Into<String>) -> CliError {
+    CliError::BadOption {
+        option,
+        message: message.into(),
+    }
+}
+
+fn affine_error(context: &str) -> impl Fn(AffineEmError) -> CliError + '_ {
+    move |source| CliError::AffineEm {
+        context: context.to_string(),
+        source,
+    }
+}
+
+/// `a,b,c,d` or `a,b,c,d,q,r` over the nominal benchmark values.
+fn parse_nlbench_init(text: &str) -> Result<NlbenchParams, CliError> {
+    let values = text
+        .split(',')
+        .map(|s| {
+            let v: f64 = s
+                .trim()
+                .parse()
+                .map_err(|_| bad("--init", format!("{s:?} is not a number")))?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(bad("--init", format!("{s:?} is not finite")))
+            }
+        })
+        .collect::<Result<Vec<f64>, _>>()?;
+    let mut p = NlbenchParams::TRUE;
+    match values.as_slice() {
+        [a, b, c, d] => (p.a, p.b, p.c, p.d) = (*a, *b, *c, *d),
+        [a, b, c, d, q, r] => (p.a, p.b, p.c, p.d, p.q, p.r) = (*a, *b, *c, *d, *q, *r),
+        _ => {
+            return Err(bad(
+                "--init",
+                format!(
+                    "nlbench needs a,b,c,d or a,b,c,d,q,r ({} values given)",
+                    values.len()
+                ),
+            ));
+        }
+    }
+    if !(p.q > 0.0 && p.r > 0.0) {
+        return Err(bad("--init", "q and r must be positive"));
+    }
+    Ok(p)
+}
+
+fn choose(o: &Options, nlbench: bool) -> Result<Chosen, CliError> {
+    if nlbench {
+        let start = if o.init.eq_ignore_ascii_case("n4sid") {
+            NlbenchParams::TRUE
+        } else {
+            parse_nlbench_init(&o.init)?
+        };
+        return Ok(Chosen::Nlbench(NlbenchAffine::params(&start)));
+    }
+    if o.init.eq_ignore_ascii_case("n4sid") {
+        return Err(bad(
+            "--init",
+            "fit affine needs --init FILE (a linear model) or --system nlbench",
+        ));
+    }
+    let model = read_model(Path::new(&o.init))?;
+    let (affine, params) = LinearAffine::new(&model).map_err(affine_error(&o.init))?;
+    Ok(Chosen::Linear(affine, params))
+}
+
+/// Records the estimate after every iteration.
+struct ParamTrace<F> {
+    row: F,
+    rows: Vec<Vec<f64>>,
+}
+
+impl<F: Fn(&AffineParams) -> Vec<f64>> EmObserver<AffineParams> for ParamTrace<F> {
+    fn iteration(&mut self, info: &IterationInfo<'_, AffineParams>) {
+        let mut row = vec![info.loglik];
+        row.extend((self.row)(info.estimate));
+        self.rows.push(row);
+    }
+}
+
+/// The command's settings and data, shared by the generic steps.
+struct Job<'a> {
+    o: &'a Options,
+    file: DataFile,
+    options: EmOptions,
+}
+
+/// `sysid fit nlbench` / `sysid fit affine`.
+pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
+    if o.particles == 0 {
+        return Err(bad("--particles", "must be at least 1"));
+    }
+    let options = EmOptions {
+        max_iterations: o.max_iter,
+        tol: 0.0,
+        ..EmOptions::default()
+    }
+    .check()
+    .map_err(|e| bad("--max-iter", e.to_string()))?;
+    let chosen = choose(o, nlbench)?;
+    let file = o.data.read()?;
+    let outputs = match &chosen {
+        Chosen::Nlbench(_) => 1,
+        Chosen::Linear(model, _) => model.output_dim(),
+    };
+    super::check_column_counts(&file, 0, outputs)?;
+    let job = Job { o, file, options };
+    let noise = if o.estimate_noise {
+        Covariance::Full
+    } else {
+        Covariance::Fixed
+    };
+    let spec = AffineEmSpec {
+        pi_x: noise,
+        pi_y: noise,
+        ..AffineEmSpec::default()
+    };
+    match chosen {
+        Chosen::Nlbench(start) => fit_with(&job, &NlbenchAffine, start, spec, |p| {
+            let n = NlbenchAffine::nlbench_params(p);
+            vec![n.a, n.b, n.c, n.d, n.q, n.r]
+        }),
+        Chosen::Linear(model, start) => fit_with(&job, &model, start, spec, |p| {
+            p.beta_x
+                .iter()
+                .chain(p.beta_y.iter())
+                .chain(p.pi_x.iter())
+                .chain(p.pi_y.iter())
+                .copied()
+                .collect()
+        }),
+    }
+}
+
+fn fit_with<A, F>(
+    job: &Job,
+    model: &A,
+    start: AffineParams,
+    spec: AffineEmSpec,
+    row: F,
+) -> Result<(), CliError>
+where
+    A: AffineModel + ParamNames,
+    A::Smc: sysid::smc::TransitionBound,
+    F: Fn(&AffineParams) -> Vec<f64>,
+{
+    match job.o.smoother.as_str() {
+        "tanizaki" => fit_with_smoother(job, model, start, spec, row, Tanizaki::default()),
+        "ffbsi-reject" => {
+            let smoother = FfbsiReject {
+                paths: job.o.particles,
+                max_trials: None,
+                parallel: false,
+            };
+            fit_with_smoother(job, model, start, spec, row, smoother)
+        }
+        other => Err(bad(
+            "--smoother",
+            format!("unknown smoother {other:?} (known: tanizaki, ffbsi-reject)"),
+        )),
+    }
+}
+
+/// Names of the columns of the parameter trace and the output file's contents.
+trait ParamNames {
+    fn names(&self, params: &AffineParams) -> Vec<String>;
+    fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError>;
+}
+
+impl ParamNames for NlbenchAffine {
+    fn names(&self, _: &AffineParams) -> Vec<String> {
+        ["a", "b", "c", "d", "q", "r"].map(String::from).to_vec()
+    }
+
+    fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError> {
+        let p = NlbenchAffine::nlbench_params(params);
+        Ok(serde_json::json!({
+            "system": "nlbench", "a": p.a, "b": p.b, "c": p.c, "d": p.d,
+            "q": p.q, "r": p.r, "mu": p.mu, "p1": p.p1,
+        }))
+    }
+}
+
+impl ParamNames for LinearAffine {
+    fn names(&self, p: &AffineParams) -> Vec<String> {
+        let mut names = Vec::new();
+        for (label, m) in [
+            ("A", &p.beta_x),
+            ("C", &p.beta_y),
+            ("Q", &p.pi_x),
+            ("R", &p.pi_y),
+        ] {
+            // column-major, as the values are written
+            for j in 0..m.ncols() {
+                for i in 0..m.nrows() {
+                    names.push(format!("{label}{}{}", i + 1, j + 1));
+                }
+            }
+        }
+        names
+    }
+
+    fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError> {
+        let model = self.model(params).map_err(affine_error("estimate"))?;
+        Ok(serde_json::to_value(ModelSpec::from_model(&model)).expect("serialises"))
+    }
+}
+
+fn fit_with_smoother<A, F, S>(
+    job: &Job,
+    model: &A,
+    start: AffineParams,
+    spec: AffineEmSpec,
+    row: F,
+    smoother: S,
+) -> Result<(), CliError>
+where
+    A: AffineModel + ParamNames,
+    F: Fn(&AffineParams) -> Vec<f64>,
+    S: Smoother<A::Smc>,
+{
+    let o = job.o;
+    let context = o.data.data.display().to_string();
+    let series = series_of(&job.file, &context)?;
+    let names = model.names(&start);
+    let mut em = AffineEm::new(model, series, o.particles, smoother, spec, o.seed)
+        .map_err(affine_error(&context))?;
+    let mut trace = ParamTrace {
+        row,
+        rows: Vec::new(),
+    };
+    let result = run_em(&mut em, start, &job.options, &mut trace);
+    if let Termination::Error { iteration, error } = &result.termination {
+        return Err(affine_error(&format!(
+            "{context}, EM iteration {iteration}"
+        ))(error.clone()));
+    }
+    let mut json = model.model_json(&result.estimate)?;
+    // A linear model file stays a plain model file (readable by every command); the
+    // nlbench result records how it was obtained.
+    if json.get("system").is_some() {
+        json["particle_em"] = serde_json::json!({
+        "iterations": result.iterations, "particles": o.particles, "smoother": o.smoother,
+        "seed": o.seed, "loglik_estimate": result.loglik,
+        "likelihood_decreases": result.decreases,
+        });
+    }
+    let text = serde_json::to_string_pretty(&json).expect("serialises");
+    write_output(&o.out, o.force, &(text + "\n"))?;
+    if let Some(path) = &o.trace {
+        let mut text = format!("iteration,loglik,{}\n", names.join(","));
+        for (k, values) in trace.rows.iter().enumerate() {
+            let values: Vec<String> = values.iter().map(|v| v.to_string()).collect();
+            text += &format!("{},{}\n", k + 1, values.join(","));
+        }
+        write_output(path, o.force, &text)?;
+    }
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "fit", "loglik_estimate": result.loglik,
+            "iterations": result.iterations, "likelihood_decreases": result.decreases,
+            "seconds": result.elapsed.as_secs_f64(), "out": o.out,
+        }),
+        || {
+            format!(
+                "particle EM: {} iterations in {:.2} s ({} particles, {}), loglik estimate {}; wrote {}",
+                result.iterations,
+                result.elapsed.as_secs_f64(),
+                o.particles,
+                o.smoother,
+                result.loglik.unwrap_or(f64::NEG_INFINITY),
+                o.out.display()
+            )
+        },
+    );
+    Ok(())
+}

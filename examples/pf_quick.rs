@@ -54,7 +54,11 @@ fn main() {
             },
             41,
         );
-        println!("tanizaki M=50: {ms:.3} ms");
+        let stats = Tanizaki::default()
+            .trajectories(&model, h, &data, 0)
+            .unwrap()
+            .1;
+        println!("tanizaki M=50: {ms:.3} ms {stats:?}");
     }
     let mut pf = filter(1000, true);
     pf.run(&model, &data, 1).unwrap();

@@ -6,7 +6,7 @@ use sysid::kalman::{KalmanWorkspace, Record};
 use sysid::models::{LinearGaussianSmc, Nlbench, System, lgss};
 use sysid::smc::{
     Ffbsi, FfbsiReject, FilterOptions, Genealogy, ParticleFilter, Resampling, Series, Smoother,
-    Tanizaki,
+    Tanizaki, Trajectories,
 };
 
 fn lgss_data(steps: usize, seed: u64) -> (Record, Vec<f64>) {
@@ -201,15 +201,47 @@ fn rejection_ffbsi_and_exact_ffbsi_draw_the_same_marginals() {
     .trajectories(&model, history, &data, 2)
     .unwrap();
     assert!(stats.trials > 0);
-    // Given the filter, both draw i.i.d. paths from the same law: KS at level 0.001
-    // (critical value 1.95 sqrt(2 / k)) at five time points.
-    let critical = 1.95 * (2.0 / k as f64).sqrt();
-    for t in [0, 25, 50, 75, 99] {
-        let mut a = exact.states(t).to_vec();
-        let mut b = rejection.states(t).to_vec();
-        let d = ks_statistic(&mut a, &mut b);
+    assert_same_marginals(&exact, &rejection, &[0, 25, 50, 75, 99]);
+}
+
+/// Given the filter, two smoothers that draw i.i.d. paths from the same law: KS at
+/// level 0.001 (critical value 1.95 sqrt(2 / k) for k paths each) at the time points.
+fn assert_same_marginals(a: &Trajectories, b: &Trajectories, times: &[usize]) {
+    let critical = 1.95 * (2.0 / a.paths() as f64).sqrt();
+    for &t in times {
+        let d = ks_statistic(&mut a.states(t).to_vec(), &mut b.states(t).to_vec());
         assert!(d < critical, "t = {t}: KS {d} >= {critical}");
     }
+}
+
+#[test]
+fn tanizaki_by_rejection_and_by_exact_draws_give_the_same_marginals() {
+    // nlbench: peaked transitions, so both the accepted proposals and the exact
+    // fallback are exercised.
+    let model = Nlbench::truth();
+    let sim = model.simulate(60, 4);
+    let data = Series::new(&sim.outputs, 1).unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 1000,
+        store_history: true,
+        ..Default::default()
+    })
+    .unwrap();
+    pf.run(&model, &data, 3).unwrap();
+    let history = pf.history().unwrap();
+    let exact_smoother = Tanizaki {
+        parallel: false,
+        max_trials: Some(0),
+    };
+    let (exact, exact_stats) = exact_smoother
+        .trajectories(&model, history, &data, 1)
+        .unwrap();
+    let (rejection, stats) = Tanizaki::default()
+        .trajectories(&model, history, &data, 2)
+        .unwrap();
+    assert_eq!(exact_stats.trials, 0);
+    assert!(stats.trials > 0 && stats.fallbacks > 0, "{stats:?}");
+    assert_same_marginals(&exact, &rejection, &[0, 15, 30, 45, 59]);
 }
 
 #[test]

@@ -264,7 +264,11 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         let history = pf.history().expect("history stored");
         let seed = c.seed.wrapping_add(1);
         let smoothed = match a.method.as_str() {
-            "tanizaki" => Tanizaki { parallel }.trajectories(model, history, &series, seed),
+            "tanizaki" => Tanizaki {
+                parallel,
+                max_trials: None,
+            }
+            .trajectories(model, history, &series, seed),
             "ffbsi" => Ffbsi { paths: a.paths, parallel }.trajectories(model, history, &series, seed),
             "ffbsi-reject" => FfbsiReject {
                 paths: a.paths,

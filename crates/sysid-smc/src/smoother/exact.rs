@@ -7,8 +7,8 @@ use super::backward::{BackwardStep, backward_error};
 use crate::model::TransitionDensity;
 use crate::simd::Kernel;
 use crate::streams::Rng;
-use crate::vexp::exp_shifted_sum;
-use crate::weights::{DrawFailure, draw_from_weights, shift_rows_by_max};
+use crate::vexp::{exp_lane, exp_shifted_sum};
+use crate::weights::{DrawFailure, draw_from_weights, max_value, shift_rows_by_max};
 use crate::{History, Series, SmcError};
 
 /// Which filter cloud the backward kernel draws from.
@@ -22,12 +22,20 @@ pub(crate) enum Cloud {
 }
 
 /// Draws index `i` with probability proportional to `W_t^i f(x~_{t+1} | x_t^i)` for each
-/// path, evaluating the whole block's transition densities at once.
+/// path, evaluating the whole block's transition log-densities at once.
+///
+/// With `rejection_trials = Some(k)` each draw first tries up to `k` times to propose
+/// `i` uniformly and accept it with probability `W_t^i f_i / max_j (W_t^j f_j)`
+/// (rejection against the row's own maximum: one exponential per trial instead of
+/// one per candidate), then falls back to the exact draw. Both routes sample exactly
+/// the same distribution; the first is several times cheaper when the candidates'
+/// densities are of similar size.
 pub(crate) struct ExactStep<'a, M> {
     pub model: &'a M,
     pub history: &'a History,
     pub data: &'a Series<'a>,
     pub cloud: Cloud,
+    pub rejection_trials: Option<usize>,
     pub matrix: Vec<f64>,
     pub scratch: Vec<f64>,
     pub gathered: Vec<f64>,
@@ -41,6 +49,7 @@ impl<'a, M: TransitionDensity> ExactStep<'a, M> {
             history,
             data,
             cloud,
+            rejection_trials: None,
             matrix: Vec::new(),
             scratch: Vec::new(),
             gathered: Vec::new(),
@@ -129,18 +138,58 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
                 }
             }
         }
-        // One long exp over the whole block (rows shifted by their maxima first) keeps
-        // the vector pipeline full; then one blocked scan per row.
-        shift_rows_by_max(&mut self.matrix, m).map_err(|(k, f)| backward_error(f, t, k))?;
-        exp_shifted_sum(&mut self.matrix, 0.0);
-        for (k, (row, slot)) in self.matrix.chunks_exact(m).zip(out.iter_mut()).enumerate() {
-            let i = draw_from_weights(row, rng.random())
-                .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
-            *slot = if resampled {
+        let pick = |i: usize| {
+            if resampled {
                 self.history.ancestors(t + 1)[i]
             } else {
                 i
+            }
+        };
+        let Some(trials) = self.rejection_trials else {
+            // One long exp over the whole block (rows shifted by their maxima first)
+            // keeps the vector pipeline full; then one blocked scan per row.
+            shift_rows_by_max(&mut self.matrix, m).map_err(|(k, f)| backward_error(f, t, k))?;
+            exp_shifted_sum(&mut self.matrix, 0.0);
+            for (k, (row, slot)) in self.matrix.chunks_exact(m).zip(out.iter_mut()).enumerate() {
+                let i = draw_from_weights(row, rng.random())
+                    .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
+                *slot = pick(i);
+            }
+            self.stats.density_evaluations += (out.len() * m) as u64;
+            return Ok(());
+        };
+        for (k, (row, slot)) in self
+            .matrix
+            .chunks_exact_mut(m)
+            .zip(out.iter_mut())
+            .enumerate()
+        {
+            let max = max_value(row);
+            if max == f64::NEG_INFINITY {
+                return Err(backward_error(DrawFailure::Degenerate, t, k));
+            }
+            if max == f64::INFINITY || row.iter().any(|v| v.is_nan()) {
+                return Err(backward_error(DrawFailure::Invalid, t, k));
+            }
+            let mut accepted = None;
+            for _ in 0..trials {
+                self.stats.trials += 1;
+                let i = ((rng.random::<f64>() * m as f64) as usize).min(m - 1);
+                if rng.random::<f64>() < exp_lane(row[i] - max) {
+                    accepted = Some(i);
+                    break;
+                }
+            }
+            let i = match accepted {
+                Some(i) => i,
+                None => {
+                    self.stats.fallbacks += 1;
+                    exp_shifted_sum(row, max);
+                    draw_from_weights(row, rng.random())
+                        .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?
+                }
             };
+            *slot = pick(i);
         }
         self.stats.density_evaluations += (out.len() * m) as u64;
         Ok(())

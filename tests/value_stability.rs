@@ -93,6 +93,6 @@ fn seeded_nlbench_particle_methods_are_pinned() {
 const PINNED_NLBENCH: [u64; 4] = [
     0xbfbf12536f02eb04,
     0xc0471385ccc7c390,
-    0x3fe96201e6c4a52a,
+    0x3fe9788eb12ebadf,
     0x3fef630a01dac228,
 ];

@@ -44,9 +44,8 @@ const TAYLOR: [f64; 13] = [
     1.0,
 ];
 
-/// `exp(x)` for one value, the same bits as the vector paths give.
 #[inline(always)]
-pub(crate) fn exp_lane(x: f64) -> f64 {
+fn exp_lane(x: f64) -> f64 {
     let low = if x < MIN_ARG { MIN_ARG } else { x };
     let clamped = if low > MAX_ARG { MAX_ARG } else { low };
     let shifted = clamped.mul_add(LOG2_E, ROUND_MAGIC);

@@ -7,9 +7,10 @@ use super::backward::{BackwardStep, backward_error};
 use crate::model::TransitionDensity;
 use crate::simd::Kernel;
 use crate::streams::Rng;
-use crate::vexp::{exp_lane, exp_shifted_sum};
+use crate::vexp::exp_shifted_sum;
 use crate::weights::{DrawFailure, draw_from_weights, max_value, shift_rows_by_max};
 use crate::{History, Series, SmcError};
+use rand_distr::{Distribution, Exp1};
 
 /// Which filter cloud the backward kernel draws from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -175,7 +176,9 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
             for _ in 0..trials {
                 self.stats.trials += 1;
                 let i = ((rng.random::<f64>() * m as f64) as usize).min(m - 1);
-                if rng.random::<f64>() < exp_lane(row[i] - max) {
+                // accept with probability exp(l_i - max): -ln U ~ Exp(1), so no exp
+                let e: f64 = Exp1.sample(rng);
+                if row[i] - max > -e {
                     accepted = Some(i);
                     break;
                 }

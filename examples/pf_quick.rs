@@ -59,6 +59,17 @@ fn main() {
             .unwrap()
             .1;
         println!("tanizaki M=50: {ms:.3} ms {stats:?}");
+        let exact = Tanizaki {
+            parallel: false,
+            max_trials: Some(0),
+        };
+        let ms = median(
+            |r| {
+                exact.trajectories(&model, h, &data, r).unwrap();
+            },
+            41,
+        );
+        println!("tanizaki M=50, exact draws only: {ms:.3} ms");
     }
     let mut pf = filter(1000, true);
     pf.run(&model, &data, 1).unwrap();

@@ -182,6 +182,20 @@ pub fn run(a: &Args) -> Result<(), String> {
     }
     let runs: Vec<usize> = (0..a.runs).filter(|r| r % count == index).collect();
     let started = std::time::Instant::now();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let progress = |result: Result<RunResult, String>| {
+        let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if let Ok(r) = &result {
+            eprintln!(
+                "nlbench-em: run {} done ({k}/{}, {:.1} s, converged {})",
+                r.run,
+                runs.len(),
+                r.seconds,
+                converged(&r.estimate)
+            );
+        }
+        result
+    };
     let results: Vec<Result<RunResult, String>> = runs
         .par_iter()
         .map(|&run| match a.smoother.as_str() {
@@ -199,6 +213,7 @@ pub fn run(a: &Args) -> Result<(), String> {
                 "--smoother {other:?}: use tanizaki or ffbsi-reject"
             )),
         })
+        .map(progress)
         .collect();
     let results: Vec<RunResult> = results.into_iter().collect::<Result<_, _>>()?;
     let params = json!({"T": a.steps, "M": a.particles, "iters": a.iters, "runs": a.runs,

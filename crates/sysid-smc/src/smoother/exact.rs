@@ -169,7 +169,7 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
             if max == f64::NEG_INFINITY {
                 return Err(backward_error(DrawFailure::Degenerate, t, k));
             }
-            if max == f64::INFINITY || row.iter().any(|v| v.is_nan()) {
+            if max == f64::INFINITY || row.iter().fold(false, |nan, v| nan | v.is_nan()) {
                 return Err(backward_error(DrawFailure::Invalid, t, k));
             }
             let mut accepted = None;

@@ -55,43 +55,51 @@ impl History {
     }
 
     /// Number of stored steps T.
+    #[inline]
     pub fn steps(&self) -> usize {
         self.steps
     }
 
     /// Number of particles M.
+    #[inline]
     pub fn particles(&self) -> usize {
         self.particles
     }
 
     /// State dimension.
+    #[inline]
     pub fn state_dim(&self) -> usize {
         self.state_dim
     }
 
     /// The particles `x_t^i`, particle-major.
+    #[inline]
     pub fn states(&self, t: usize) -> &[f64] {
         let len = self.particles * self.state_dim;
         &self.states[t * len..(t + 1) * len]
     }
 
     /// The normalised filtering weights `W_t^i`.
+    #[inline]
     pub fn weights(&self, t: usize) -> &[f64] {
         &self.weights[t * self.particles..(t + 1) * self.particles]
     }
 
     /// `log W_t^i`.
+    #[inline]
     pub fn log_weights(&self, t: usize) -> &[f64] {
         &self.log_weights[t * self.particles..(t + 1) * self.particles]
     }
 
     /// The ancestors `a_t^i` (indices into step `t - 1`).
+    #[inline]
     pub fn ancestors(&self, t: usize) -> &[usize] {
         &self.ancestors[t * self.particles..(t + 1) * self.particles]
     }
 
     /// Whether the filter resampled after step `t`, so that the ancestors of step
     /// `t + 1` are an equally weighted resample of step `t`.
+    #[inline]
     pub fn resampled_after(&self, t: usize) -> bool {
         self.resampled[t]
     }

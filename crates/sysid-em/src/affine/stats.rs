@@ -144,14 +144,14 @@ impl<A: AffineModel> AdditiveFunctional for StatisticsCollector<'_, A> {
                 }
             }
         }
-        let columns: Vec<&[f64]> = self.columns.chunks_exact(paths).collect();
+        let column = |i: usize| &self.columns[i * paths..(i + 1) * paths];
         for j in 0..k {
             for i in 0..=j {
-                self.step_sum[j * k + i] = dot(columns[i], columns[j]);
+                self.step_sum[j * k + i] = dot(column(i), column(j));
             }
         }
-        for (s, column) in self.alpha_sum.iter_mut().zip(&columns) {
-            *s = column.iter().sum();
+        for (i, s) in self.alpha_sum.iter_mut().enumerate() {
+            *s = column(i).iter().sum();
         }
         let total_weight = weight * paths as f64;
         if t == 0 {

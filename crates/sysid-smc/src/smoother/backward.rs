@@ -44,6 +44,13 @@ pub(crate) fn backward_error(failure: DrawFailure, t: usize, path: usize) -> Smc
 fn gather(history: &History, t: usize, indices: &[usize], out: &mut [f64]) {
     let n = history.state_dim();
     let states = history.states(t);
+    if n == 1 {
+        // scalar states: plain indexing, no per-element copy call
+        for (x, &i) in out.iter_mut().zip(indices) {
+            *x = states[i];
+        }
+        return;
+    }
     for (x, &i) in out.chunks_exact_mut(n).zip(indices) {
         x.copy_from_slice(&states[i * n..(i + 1) * n]);
     }

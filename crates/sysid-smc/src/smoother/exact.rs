@@ -115,8 +115,13 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
         let cloud: &[f64] = if resampled {
             let states = self.history.states(t);
             self.gathered.clear();
-            for &a in self.history.ancestors(t + 1) {
-                self.gathered.extend_from_slice(&states[a * n..(a + 1) * n]);
+            if n == 1 {
+                let ancestors = self.history.ancestors(t + 1);
+                self.gathered.extend(ancestors.iter().map(|&a| states[a]));
+            } else {
+                for &a in self.history.ancestors(t + 1) {
+                    self.gathered.extend_from_slice(&states[a * n..(a + 1) * n]);
+                }
             }
             &self.gathered
         } else {

@@ -88,3 +88,46 @@ pub enum CliError {
         expected: usize,
     },
 }
+
+/// Exit code of bad input (data, model files, options): 2.
+pub const EXIT_BAD_INPUT: u8 = 2;
+/// Exit code of a failure while running (I/O, numerical breakdown): 1.
+pub const EXIT_FAILURE: u8 = 1;
+
+impl CliError {
+    /// [`EXIT_BAD_INPUT`] when the user's data, model file or options are at fault,
+    /// else [`EXIT_FAILURE`].
+    pub fn exit_code(&self) -> u8 {
+        use sysid::em::affine::AffineEmError;
+        use sysid::em::linear::LinearEmError;
+        use sysid::smc::SmcError;
+        use sysid::subspace::SubspaceError;
+        let smc_input = |e: &SmcError| {
+            matches!(
+                e,
+                SmcError::InvalidOption { .. }
+                    | SmcError::DimensionMismatch { .. }
+                    | SmcError::NonFiniteData { .. }
+            )
+        };
+        let bad_input = match self {
+            CliError::Io { .. } | CliError::Kalman { .. } => false,
+            CliError::Subspace(e) => !matches!(e, SubspaceError::Numerical(_)),
+            CliError::Em(e) => !matches!(e, LinearEmError::Kalman(_) | LinearEmError::Linalg(_)),
+            CliError::Smc { source, .. } => smc_input(source),
+            CliError::AffineEm { source, .. } => match source {
+                AffineEmError::Smc(e) => smc_input(e),
+                AffineEmError::InvalidParams(_)
+                | AffineEmError::Unsupported(_)
+                | AffineEmError::NoSteps { .. } => true,
+                _ => false,
+            },
+            _ => true,
+        };
+        if bad_input {
+            EXIT_BAD_INPUT
+        } else {
+            EXIT_FAILURE
+        }
+    }
+}

@@ -139,6 +139,25 @@ fn fit_particle_rejects_bad_options() {
     ]);
     assert_one_line_error(&affine, &["wiener"]);
     assert!(!out_file.exists(), "no output after a refused run");
+    // a failure that is not the input's fault (here: an unwritable output) exits 1
+    let unwritable = dir.join("no-such-folder").join("f.json");
+    let out = sysid(&[
+        "fit",
+        "nlbench",
+        "--data",
+        s(&data),
+        "--iters",
+        "1",
+        "--out",
+        s(&unwritable),
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stderr).lines().count(), 1);
 }
 
 #[test]

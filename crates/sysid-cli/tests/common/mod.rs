@@ -32,7 +32,8 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Asserts failure with exactly one stderr line containing every `needle`.
+/// Asserts a bad-input failure: exit code 2 and exactly one stderr line containing
+/// every `needle`.
 pub fn assert_one_line_error(out: &Output, needles: &[&str]) {
     assert!(
         !out.status.success(),
@@ -41,6 +42,7 @@ pub fn assert_one_line_error(out: &Output, needles: &[&str]) {
     );
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.lines().count(), 1, "stderr should be one line: {err}");
+    assert_eq!(out.status.code(), Some(2), "bad input exits with 2: {err}");
     for n in needles {
         assert!(err.contains(n), "stderr {err:?} should contain {n:?}");
     }

@@ -53,39 +53,7 @@ enum Runner {
         reps: usize,
     },
     /// Seed-000 particle-EM study on nlbench (one JSON line per run, then a summary).
-    NlbenchEm {
-        /// Number of Monte Carlo runs (each with its own data set and start).
-        #[arg(long, default_value_t = 200)]
-        runs: usize,
-        /// EM iterations per run.
-        #[arg(long, default_value_t = 1000)]
-        iters: usize,
-        /// Particles M (and smoothed paths for ffbsi-reject).
-        #[arg(long, default_value_t = 50)]
-        particles: usize,
-        /// Data length T.
-        #[arg(long, default_value_t = 1000)]
-        steps: usize,
-        /// E-step smoother: tanizaki (the paper's) or ffbsi-reject.
-        #[arg(long, default_value = "tanizaki")]
-        smoother: String,
-        /// Study seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Run only the runs r with r % n == i, given as i/n.
-        #[arg(long, default_value = "0/1")]
-        shard: String,
-        /// Write the (run, iteration, a, b, c, d) trajectories to this CSV file.
-        #[arg(long)]
-        trace_out: Option<std::path::PathBuf>,
-        /// Replace an existing trace file.
-        #[arg(long)]
-        force: bool,
-        /// Noise variances q, r: `known` (the paper: only a, b, c, d estimated) or
-        /// `estimated` (q and r start at 10 times their true values and are estimated).
-        #[arg(long, default_value = "known")]
-        noise: String,
-    },
+    NlbenchEm(nlbench_em::Args),
     /// Merges the outputs of `nlbench-em` shards into one set of run lines and summary.
     NlbenchEmMerge {
         /// JSON-lines files written by `nlbench-em --shard i/n`.
@@ -118,38 +86,7 @@ fn main() {
         Runner::Kalman { reps, system } => kalman::run(reps.max(1), system.as_deref()),
         Runner::Em { reps } => em::run(reps.max(1)),
         Runner::Smc { reps } => smc::run(reps.max(1)),
-        Runner::NlbenchEm {
-            runs,
-            iters,
-            particles,
-            steps,
-            smoother,
-            seed,
-            shard,
-            trace_out,
-            force,
-            noise,
-        } => {
-            let parsed = shard
-                .split_once('/')
-                .and_then(|(i, n)| Some((i.parse().ok()?, n.parse().ok()?)));
-            let shard = parsed
-                .ok_or_else(|| format!("--shard {shard:?}: expected i/n"))
-                .unwrap_or_else(|e| exit_with(&e));
-            let args = nlbench_em::Args {
-                runs,
-                iters,
-                particles,
-                steps,
-                smoother,
-                seed,
-                shard,
-                trace_out,
-                force,
-                noise,
-            };
-            nlbench_em::run(&args).unwrap_or_else(|e| exit_with(&e));
-        }
+        Runner::NlbenchEm(args) => nlbench_em::run(&args).unwrap_or_else(|e| exit_with(&e)),
         Runner::NlbenchEmMerge { files } => {
             nlbench_em::merge(&files).unwrap_or_else(|e| exit_with(&e));
         }

@@ -17,19 +17,48 @@ use sysid::em::{EmObserver, EmOptions, IterationInfo, run_em};
 use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
 use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki, stream};
 
-/// The runner's settings.
+/// The runner's settings (the `nlbench-em` command line).
+#[derive(clap::Args, Debug)]
 pub struct Args {
+    /// Number of Monte Carlo runs (each with its own data set and start).
+    #[arg(long, default_value_t = 200)]
     pub runs: usize,
+    /// EM iterations per run.
+    #[arg(long, default_value_t = 1000)]
     pub iters: usize,
+    /// Particles M (and smoothed paths for ffbsi-reject).
+    #[arg(long, default_value_t = 50)]
     pub particles: usize,
+    /// Data length T.
+    #[arg(long, default_value_t = 1000)]
     pub steps: usize,
+    /// E-step smoother: tanizaki (the paper's) or ffbsi-reject.
+    #[arg(long, default_value = "tanizaki")]
     pub smoother: String,
+    /// Study seed.
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Run only the runs r with r % n == i, given as i/n.
+    #[arg(long, default_value = "0/1", value_parser = parse_shard)]
     pub shard: (usize, usize),
+    /// Write the (run, iteration, a, b, c, d) trajectories to this CSV file.
+    #[arg(long)]
     pub trace_out: Option<std::path::PathBuf>,
+    /// Replace an existing trace file.
+    #[arg(long)]
     pub force: bool,
-    /// `known` or `estimated` noise variances.
+    /// Noise variances q, r: `known` (the paper: only a, b, c, d estimated),
+    /// `estimated` (q and r start at 10 times their true values and are estimated) or
+    /// `q` (q starts at 100 times its true value and is estimated, r known).
+    #[arg(long, default_value = "known")]
     pub noise: String,
+}
+
+/// `i/n` as `(i, n)`.
+fn parse_shard(text: &str) -> Result<(usize, usize), String> {
+    text.split_once('/')
+        .and_then(|(i, n)| Some((i.parse().ok()?, n.parse().ok()?)))
+        .ok_or_else(|| format!("{text:?}: expected i/n"))
 }
 
 /// Particles of the reference filter that scores the truth and the final estimate.

@@ -53,6 +53,10 @@ impl AffineStatistics {
 }
 
 /// `sum_k a_k b_k` with four interleaved partial sums (so the compiler vectorises it).
+///
+/// The same idea as `sysid_linalg::dot`, which pairs the partial sums differently.
+/// Kept until the seed-000 study (docs/particle-em.md) is next rerun: switching changes
+/// the round-off of the statistics, and particle EM amplifies that into different runs.
 #[inline]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0f64; 4];

@@ -120,18 +120,23 @@ pub fn draw_from_weights(weights: &[f64], uniform: f64) -> Option<usize> {
 #[inline(always)]
 pub fn shift_rows_by_max(matrix: &mut [f64], row_len: usize) -> Result<(), (usize, DrawFailure)> {
     for (k, row) in matrix.chunks_exact_mut(row_len).enumerate() {
-        let max = max_value(row);
-        if max == f64::NEG_INFINITY {
-            return Err((k, DrawFailure::Degenerate));
-        }
-        if max == f64::INFINITY {
-            return Err((k, DrawFailure::Invalid));
-        }
+        let max = checked_row_max(row).map_err(|f| (k, f))?;
         for v in row.iter_mut() {
             *v -= max;
         }
     }
     Ok(())
+}
+
+/// The maximum of a row of log-weights, or why no draw is possible from it: every
+/// entry `-inf` (degenerate) or some entry `+inf` (invalid). NaN entries are ignored.
+#[inline(always)]
+pub fn checked_row_max(row: &[f64]) -> Result<f64, DrawFailure> {
+    match max_value(row) {
+        f64::NEG_INFINITY => Err(DrawFailure::Degenerate),
+        f64::INFINITY => Err(DrawFailure::Invalid),
+        max => Ok(max),
+    }
 }
 
 /// Why a categorical draw from log-weights failed.

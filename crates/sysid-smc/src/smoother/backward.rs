@@ -41,7 +41,8 @@ pub(crate) fn backward_error(failure: DrawFailure, t: usize, path: usize) -> Smc
     }
 }
 
-fn gather(history: &History, t: usize, indices: &[usize], out: &mut [f64]) {
+/// Copies the states `indices` of step `t` (stride `state_dim`) into `out`.
+pub(crate) fn gather(history: &History, t: usize, indices: &[usize], out: &mut [f64]) {
     let n = history.state_dim();
     let states = history.states(t);
     if n == 1 {

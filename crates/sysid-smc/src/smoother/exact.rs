@@ -3,12 +3,12 @@
 use rand::RngExt;
 
 use super::SmootherStats;
-use super::backward::{BackwardStep, backward_error};
+use super::backward::{BackwardStep, backward_error, gather};
 use crate::model::TransitionDensity;
 use crate::simd::Kernel;
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
-use crate::weights::{DrawFailure, draw_from_weights, max_value, shift_rows_by_max};
+use crate::weights::{DrawFailure, checked_row_max, draw_from_weights, shift_rows_by_max};
 use crate::{History, Series, SmcError};
 use rand_distr::{Distribution, Exp1};
 
@@ -27,8 +27,8 @@ pub(crate) enum Cloud {
 ///
 /// With `rejection_trials = Some(k)` each draw first tries up to `k` times to propose
 /// `i` uniformly and accept it with probability `W_t^i f_i / max_j (W_t^j f_j)`
-/// (rejection against the row's own maximum: one exponential per trial instead of
-/// one per candidate), then falls back to the exact draw. Both routes sample exactly
+/// (rejection against the row's own maximum: one Exp(1) variate per trial instead of
+/// one exponential per candidate), then falls back to the exact draw. Both routes sample exactly
 /// the same distribution; the first is several times cheaper when the candidates'
 /// densities are of similar size.
 pub(crate) struct ExactStep<'a, M> {
@@ -113,16 +113,13 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
         let m = self.history.particles();
         let resampled = self.cloud == Cloud::Resampled && self.history.resampled_after(t);
         let cloud: &[f64] = if resampled {
-            let states = self.history.states(t);
-            self.gathered.clear();
-            if n == 1 {
-                let ancestors = self.history.ancestors(t + 1);
-                self.gathered.extend(ancestors.iter().map(|&a| states[a]));
-            } else {
-                for &a in self.history.ancestors(t + 1) {
-                    self.gathered.extend_from_slice(&states[a * n..(a + 1) * n]);
-                }
-            }
+            self.gathered.resize(m * n, 0.0);
+            gather(
+                self.history,
+                t,
+                self.history.ancestors(t + 1),
+                &mut self.gathered,
+            );
             &self.gathered
         } else {
             self.history.states(t)
@@ -170,11 +167,9 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
             .zip(out.iter_mut())
             .enumerate()
         {
-            let max = max_value(row);
-            if max == f64::NEG_INFINITY {
-                return Err(backward_error(DrawFailure::Degenerate, t, k));
-            }
-            if max == f64::INFINITY || row.iter().fold(false, |nan, v| nan | v.is_nan()) {
+            let max = checked_row_max(row).map_err(|f| backward_error(f, t, k))?;
+            // proposals may never visit a NaN entry: look for one explicitly
+            if row.iter().fold(false, |nan, v| nan | v.is_nan()) {
                 return Err(backward_error(DrawFailure::Invalid, t, k));
             }
             let mut accepted = None;

@@ -31,7 +31,7 @@ fn main() {
         .unwrap()
     };
     if what == "pf" || what == "all" {
-        for (m, history) in [(50usize, true), (1000, false), (10000, false)] {
+        for (m, history) in [(50usize, true), (100, false), (1000, false), (10000, false)] {
             let mut pf = filter(m, history);
             let ms = median(
                 |r| {

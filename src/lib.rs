@@ -10,6 +10,8 @@
 //! * [`smc`]: particle filter (four resampling schemes, ESS-adaptive) and particle
 //!   smoothers (Tanizaki, FFBSi, rejection FFBSi, genealogy);
 //! * [`em`]: the EM runner and exact EM for linear Gaussian models;
+//! * [`pmcmc`]: Bayesian identification: PMMH and particle Gibbs (ancestor sampling,
+//!   backward simulation), priors, parallel chains and diagnostics;
 //! * [`models`]: the canonical systems of the source papers.
 //!
 //! # Example
@@ -26,6 +28,7 @@ pub use sysid_em as em;
 pub use sysid_kalman as kalman;
 pub use sysid_linalg as linalg;
 pub use sysid_models as models;
+pub use sysid_pmcmc as pmcmc;
 pub use sysid_smc as smc;
 pub use sysid_subspace as subspace;
 

@@ -11,10 +11,12 @@
 //! methods of `sysid-smc`, which is how they are checked against the Kalman answer.
 
 mod affine;
+mod families;
 mod linear_smc;
 mod nlbench;
 
 pub use affine::{LinearAffine, NlbenchAffine};
+pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
 pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
 

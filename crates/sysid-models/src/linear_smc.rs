@@ -7,7 +7,7 @@ use rand_distr::{Distribution, StandardNormal};
 use sysid_kalman::LinearGaussianModel;
 use sysid_linalg::{LinalgError, cholesky_upper};
 use sysid_smc::{
-    InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
+    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
     TransitionSampler,
 };
 
@@ -75,6 +75,9 @@ pub struct LinearGaussianSmc {
     /// Lower Cholesky factor of R, row-major.
     r_lower: Vec<f64>,
     r_full: Vec<f64>,
+    /// Lower Cholesky factor of P1 (row-major) and the log normaliser of `N(mu, P1)`,
+    /// when P1 is positive definite.
+    p1_lower: Option<(Vec<f64>, f64)>,
     log_norm_q: f64,
     log_norm_r: f64,
 }
@@ -109,6 +112,10 @@ impl LinearGaussianSmc {
             q_lower: row_major(&q_upper.transpose()),
             r_lower: row_major(&r_upper.transpose()),
             r_full: row_major(model.r()),
+            p1_lower: cholesky_upper("P1", model.p1()).ok().map(|u| {
+                let norm = -0.5 * n as f64 * LN_2PI - half_logdet(&u);
+                (row_major(&u.transpose()), norm)
+            }),
         })
     }
 
@@ -183,6 +190,27 @@ impl InitialSampler for LinearGaussianSmc {
         }
         x.copy_from_slice(&self.mu);
         Self::add_product(&self.initial, self.n, &z[..self.n], x);
+    }
+}
+
+impl InitialDensity for LinearGaussianSmc {
+    /// `log N(x; mu, P1)`. With a singular P1 there is no density against Lebesgue
+    /// measure; the value is then taken against the point mass at `mu` (exact for
+    /// `P1 = 0`, the only singular case the Gibbs samplers support): 0 at `mu`, `-inf`
+    /// elsewhere.
+    fn log_initial(&self, x: &[f64]) -> f64 {
+        match &self.p1_lower {
+            Some((lower, norm)) => {
+                let mut residual = [0.0; MAX_DIM];
+                let r = &mut residual[..self.n];
+                for ((ri, &xi), &mi) in r.iter_mut().zip(x).zip(&self.mu) {
+                    *ri = xi - mi;
+                }
+                norm - 0.5 * Self::whitened_norm2(lower, self.n, r)
+            }
+            None if x == self.mu.as_slice() => 0.0,
+            None => f64::NEG_INFINITY,
+        }
     }
 }
 

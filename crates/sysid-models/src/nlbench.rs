@@ -3,7 +3,7 @@
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_smc::{
-    InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
+    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
     TransitionSampler, stream,
 };
 
@@ -189,6 +189,19 @@ impl InitialSampler for Nlbench {
     fn sample_initial<R: Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
         let z: f64 = StandardNormal.sample(rng);
         x[0] = self.params.mu + self.sd_p1 * z;
+    }
+}
+
+impl InitialDensity for Nlbench {
+    /// `log N(x; mu, p1)`; with `p1 = 0` the initial state is `mu` exactly, so the
+    /// log-density (against the point mass) is 0 at `mu` and `-inf` elsewhere.
+    fn log_initial(&self, x: &[f64]) -> f64 {
+        let p = &self.params;
+        if p.p1 == 0.0 {
+            return if x[0] == p.mu { 0.0 } else { f64::NEG_INFINITY };
+        }
+        let e = x[0] - p.mu;
+        -0.5 * (LN_2PI + p.p1.ln()) - 0.5 * e * e / p.p1
     }
 }
 

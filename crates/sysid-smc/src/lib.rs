@@ -23,6 +23,7 @@
 //! Schön, Wills and Ninness (2006); Lindsten and Schön (2013), *Backward simulation
 //! methods for Monte Carlo statistical inference*; Chopin and Papaspiliopoulos (2020).
 
+pub mod conditional;
 mod error;
 pub mod filter;
 mod history;
@@ -35,11 +36,12 @@ mod streams;
 mod vexp;
 pub mod weights;
 
+pub use conditional::{ConditionalSmc, CsmcKernel, CsmcSummary};
 pub use error::SmcError;
 pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
 pub use history::History;
 pub use model::{
-    FilterModel, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
+    FilterModel, InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
     TransitionDensity, TransitionSampler,
 };
 pub use resample::Resampling;

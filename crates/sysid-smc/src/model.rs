@@ -136,3 +136,11 @@ pub trait TransitionBound: TransitionDensity {
 /// Everything the bootstrap particle filter needs.
 pub trait FilterModel: InitialSampler + TransitionSampler + ObservationDensity {}
 impl<M: InitialSampler + TransitionSampler + ObservationDensity> FilterModel for M {}
+
+/// `log mu(x_0)`, the initial-state log-density, needed with [`TransitionDensity`] and
+/// [`ObservationDensity`] for the complete-data log-likelihood `log p(x, y)` (particle
+/// Gibbs with a Metropolis-within-Gibbs parameter step).
+pub trait InitialDensity: StateSpace {
+    /// The initial-state log-density of `x`.
+    fn log_initial(&self, x: &[f64]) -> f64;
+}

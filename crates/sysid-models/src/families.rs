@@ -1,0 +1,189 @@
+//! The canonical systems as parametrised families for the Bayesian samplers of
+//! `sysid-pmcmc`, with an exact conjugate parameter step for `lgss`.
+
+use rand_distr::{Distribution, Gamma, Normal};
+use sysid_kalman::LinearGaussianModel;
+use sysid_pmcmc::{ModelFamily, ParameterStep, ScalarPrior, Support};
+use sysid_smc::{Rng, Series};
+
+use crate::{LinearGaussianSmc, Nlbench, NlbenchParams};
+use nalgebra::dmatrix;
+
+/// The scalar linear Gaussian family with `theta = (phi, q, r)`.
+///
+/// # Model
+/// ```text
+/// x_{t+1} = phi x_t + w_t,  w_t ~ N(0, q)
+/// y_t     = x_t + e_t,      e_t ~ N(0, r),     x_0 ~ N(0, p1)
+/// ```
+/// `phi` is real (no stationarity constraint), `q, r > 0`; `p1` is fixed (1 in
+/// [`lgss`](crate::lgss)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LgssFamily {
+    /// Variance of the initial state.
+    pub p1: f64,
+}
+
+impl Default for LgssFamily {
+    fn default() -> Self {
+        LgssFamily { p1: 1.0 }
+    }
+}
+
+impl LgssFamily {
+    /// The linear Gaussian model at `theta` (for the Kalman filter's exact likelihood).
+    pub fn linear_model(&self, theta: &[f64]) -> Result<LinearGaussianModel, String> {
+        let [phi, q, r] = theta else {
+            return Err(format!("lgss has 3 parameters (phi, q, r), got {}", theta.len()));
+        };
+        LinearGaussianModel::builder(dmatrix![*phi], dmatrix![1.0], dmatrix![*q], dmatrix![*r])
+            .p1(dmatrix![self.p1])
+            .build()
+            .map_err(|e| e.to_string())
+    }
+}
+
+impl ModelFamily for LgssFamily {
+    type Model = LinearGaussianSmc;
+
+    fn parameter_names(&self) -> Vec<String> {
+        ["phi", "q", "r"].map(String::from).to_vec()
+    }
+
+    fn supports(&self) -> Vec<Support> {
+        vec![Support::Real, Support::Positive, Support::Positive]
+    }
+
+    fn model(&self, theta: &[f64]) -> Result<LinearGaussianSmc, String> {
+        LinearGaussianSmc::new(&self.linear_model(theta)?).map_err(|e| e.to_string())
+    }
+}
+
+/// The exact Gibbs draw of `(phi, q, r)` given the states for [`LgssFamily`], under
+/// the conjugate priors `phi ~ N(m, s^2)`, `q ~ IG(a_q, b_q)`, `r ~ IG(a_r, b_r)`.
+///
+/// # Algorithm
+/// In turn (a systematic-scan Gibbs sweep, which leaves `p(theta | x, y)` invariant):
+/// ```text
+/// phi | x, q ~ N(v (m / s^2 + sum x_t x_{t+1} / q), v),  1/v = 1/s^2 + sum x_t^2 / q
+/// q | x, phi ~ IG(a_q + (T-1)/2, b_q + sum (x_{t+1} - phi x_t)^2 / 2)
+/// r | x, y   ~ IG(a_r + T_obs/2, b_r + sum_observed (y_t - x_t)^2 / 2)
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LgssConjugate {
+    /// Prior of `phi` (must be `Normal`).
+    pub phi: ScalarPrior,
+    /// Prior of `q` (must be `InverseGamma`).
+    pub q: ScalarPrior,
+    /// Prior of `r` (must be `InverseGamma`).
+    pub r: ScalarPrior,
+}
+
+/// A draw from `IG(shape, scale)` as the reciprocal of a `Gamma(shape, rate = scale)`.
+fn inverse_gamma(shape: f64, scale: f64, rng: &mut Rng) -> Result<f64, String> {
+    let gamma = Gamma::new(shape, 1.0 / scale).map_err(|e| format!("{e} (shape {shape}, scale {scale})"))?;
+    Ok(1.0 / gamma.sample(rng))
+}
+
+impl ParameterStep<LgssFamily> for LgssConjugate {
+    fn update(
+        &mut self,
+        _family: &LgssFamily,
+        theta: &mut [f64],
+        x: &[f64],
+        data: &Series,
+        rng: &mut Rng,
+    ) -> Result<bool, String> {
+        let (
+            ScalarPrior::Normal { mean: m, sd: s },
+            ScalarPrior::InverseGamma { shape: aq, scale: bq },
+            ScalarPrior::InverseGamma { shape: ar, scale: br },
+        ) = (self.phi, self.q, self.r)
+        else {
+            return Err("the conjugate lgss step needs phi ~ normal, q and r ~ inverse_gamma".into());
+        };
+        let pairs = || x.iter().zip(&x[1..]);
+        let q = theta[1];
+        let precision = 1.0 / (s * s) + pairs().map(|(a, _)| a * a).sum::<f64>() / q;
+        let variance = 1.0 / precision;
+        let mean = variance * (m / (s * s) + pairs().map(|(a, b)| a * b).sum::<f64>() / q);
+        let phi = Normal::new(mean, variance.sqrt())
+            .map_err(|e| e.to_string())?
+            .sample(rng);
+        let sq: f64 = pairs().map(|(a, b)| (b - phi * a).powi(2)).sum();
+        let q = inverse_gamma(aq + 0.5 * (x.len() - 1) as f64, bq + 0.5 * sq, rng)?;
+        let (count, sr) = x
+            .iter()
+            .enumerate()
+            .filter(|&(t, _)| !data.is_missing(t))
+            .fold((0usize, 0.0), |(c, s), (t, &xt)| (c + 1, s + (data.output(t)[0] - xt).powi(2)));
+        let r = inverse_gamma(ar + 0.5 * count as f64, br + 0.5 * sr, rng)?;
+        theta.copy_from_slice(&[phi, q, r]);
+        Ok(true)
+    }
+}
+
+/// The nonlinear benchmark [`Nlbench`] as a family: `theta = (a, b, c, d)` with the
+/// noise variances fixed, or `(a, b, c, d, q, r)` with `estimate_noise`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NlbenchFamily {
+    /// The fixed values (`q`, `r`, `mu`, `p1`, and `a..d` are ignored).
+    pub fixed: NlbenchParams,
+    /// Whether `q` and `r` are parameters.
+    pub estimate_noise: bool,
+}
+
+impl Default for NlbenchFamily {
+    fn default() -> Self {
+        NlbenchFamily {
+            fixed: NlbenchParams::TRUE,
+            estimate_noise: false,
+        }
+    }
+}
+
+impl NlbenchFamily {
+    /// The true parameter vector of this family.
+    pub fn truth(&self) -> Vec<f64> {
+        let p = NlbenchParams::TRUE;
+        let mut theta = vec![p.a, p.b, p.c, p.d];
+        if self.estimate_noise {
+            theta.extend([p.q, p.r]);
+        }
+        theta
+    }
+}
+
+impl ModelFamily for NlbenchFamily {
+    type Model = Nlbench;
+
+    fn parameter_names(&self) -> Vec<String> {
+        let names: &[&str] = if self.estimate_noise {
+            &["a", "b", "c", "d", "q", "r"]
+        } else {
+            &["a", "b", "c", "d"]
+        };
+        names.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn supports(&self) -> Vec<Support> {
+        let mut s = vec![Support::Real; 4];
+        if self.estimate_noise {
+            s.extend([Support::Positive, Support::Positive]);
+        }
+        s
+    }
+
+    fn model(&self, theta: &[f64]) -> Result<Nlbench, String> {
+        let expected = self.dim();
+        if theta.len() != expected {
+            return Err(format!("nlbench has {expected} parameters, got {}", theta.len()));
+        }
+        let mut p = self.fixed;
+        (p.a, p.b, p.c, p.d) = (theta[0], theta[1], theta[2], theta[3]);
+        if self.estimate_noise {
+            (p.q, p.r) = (theta[4], theta[5]);
+        }
+        Nlbench::new(p)
+    }
+}

@@ -284,3 +284,56 @@ fn batched_statistics_equal_per_path_statistics() {
     assert!((b.output_steps - s.output_steps).abs() < 1e-12);
     assert!(close(&b.initial_second_moment, &s.initial_second_moment));
 }
+
+/// PSAEM (Lindsten 2013) with 15 particles on the seed-000 benchmark: from a start
+/// 30-40 % off, the iterates land within 10 % of the truth for a, b, c, d.
+///
+/// The process noise is q = 0.1, not the study's 0.01: at q = 0.01 the transition
+/// density is so narrow that ancestor sampling almost always picks the reference's own
+/// ancestor, the kernel barely moves the trajectory, and PSAEM stays near its start
+/// (a = 0.66, c = 10.7 after 2000 iterations; docs/pmcmc.md). At q = 0.1 the fit is
+/// at the record's maximum-likelihood point by 2000 iterations (5000 give the same to
+/// 1 %), whose d is 9 % above the truth on this record.
+#[test]
+fn psaem_with_fifteen_particles_reaches_the_nlbench_truth() {
+    use sysid::em::affine::{Psaem, StepSizes};
+    let truth = NlbenchParams {
+        q: 0.1,
+        ..NlbenchParams::TRUE
+    };
+    let sim = Nlbench::new(truth).unwrap().simulate(1000, 4);
+    let data = Series::new(&sim.outputs, 1).unwrap();
+    let spec = AffineEmSpec {
+        pi_x: Covariance::Fixed,
+        pi_y: Covariance::Fixed,
+        ..AffineEmSpec::default()
+    };
+    let start = NlbenchAffine::params(&NlbenchParams {
+        a: 0.7,
+        b: 17.0,
+        c: 10.5,
+        d: 0.068,
+        ..truth
+    });
+    let mut psaem = Psaem::new(&NlbenchAffine, data, 15, StepSizes::default(), spec, 5).unwrap();
+    let fit = run_em(
+        &mut psaem,
+        start,
+        &EmOptions {
+            max_iterations: 2000,
+            tol: 0.0,
+            ..EmOptions::default()
+        },
+        &mut (),
+    );
+    let estimate = NlbenchAffine::nlbench_params(&fit.estimate);
+    eprintln!("PSAEM M = 15, 2000 iterations: {estimate:?}");
+    for (name, value, target) in [
+        ("a", estimate.a, truth.a),
+        ("b", estimate.b, truth.b),
+        ("c", estimate.c, truth.c),
+        ("d", estimate.d, truth.d),
+    ] {
+        assert!(rel(value, target) < 0.1, "{name}: {value} vs {target}");
+    }
+}

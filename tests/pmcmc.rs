@@ -151,7 +151,11 @@ fn pmmh_and_particle_gibbs_reach_the_exact_posterior() {
     )
     .unwrap();
     for c in &pmmh_chains {
-        assert!(c.acceptance_rate() > 0.05, "PMMH acceptance {}", c.acceptance_rate());
+        assert!(
+            c.acceptance_rate() > 0.05,
+            "PMMH acceptance {}",
+            c.acceptance_rate()
+        );
     }
     assert_matches_exact("PMMH", &pmmh_chains, &exact);
 
@@ -243,9 +247,10 @@ fn conditional_smc_kernels_leave_the_smoothing_distribution_invariant() {
         let mut csmc = ConditionalSmc::new(particles, kernel).unwrap();
         let mut rng = stream(3, 0);
         let mut path = vec![0.0; steps];
-        csmc.sample(&model, &data, None, &mut path, &mut rng).unwrap();
+        csmc.sample(&model, &data, None, &mut path, &mut rng)
+            .unwrap();
         let iterations = 20_000;
-        let mut draws = vec![Vec::with_capacity(iterations); steps];
+        let mut draws: Vec<Vec<f64>> = (0..steps).map(|_| Vec::with_capacity(iterations)).collect();
         let mut reference = path.clone();
         for _ in 0..iterations {
             reference.copy_from_slice(&path);
@@ -315,14 +320,27 @@ fn ancestor_sampling_mixes_with_ten_particles_where_plain_particle_gibbs_degener
         sorted[steps / 20],
         sorted[steps / 2]
     );
-    assert!(sorted[steps / 10] >= 0.5, "PGAS: more than 10 % of steps below 0.5");
-    assert!(sorted[steps / 2] >= 0.75, "PGAS: median update rate {}", sorted[steps / 2]);
+    assert!(
+        sorted[steps / 10] >= 0.5,
+        "PGAS: more than 10 % of steps below 0.5"
+    );
+    assert!(
+        sorted[steps / 2] >= 0.75,
+        "PGAS: median update rate {}",
+        sorted[steps / 2]
+    );
     let plain = rates(CsmcKernel::Plain);
     let early: f64 = plain[..50].iter().sum::<f64>() / 50.0;
     let late = plain[steps - 1];
     eprintln!("plain PG M = 10: mean update rate over t < 50 {early:.3}, at T - 1 {late:.3}");
-    assert!(early < 0.1, "plain particle Gibbs did not degenerate: {early}");
-    assert!(late > 0.5, "plain particle Gibbs should still move at the end: {late}");
+    assert!(
+        early < 0.1,
+        "plain particle Gibbs did not degenerate: {early}"
+    );
+    assert!(
+        late > 0.5,
+        "plain particle Gibbs should still move at the end: {late}"
+    );
 }
 
 #[test]
@@ -386,7 +404,17 @@ fn bad_starts_and_options_are_typed_errors() {
         burn_in: 2,
         ..Default::default()
     };
-    let err = pmmh(&family, &prior(), &data, &[0.5, -1.0, 1.0], &options, 1, 1, &()).unwrap_err();
+    let err = pmmh(
+        &family,
+        &prior(),
+        &data,
+        &[0.5, -1.0, 1.0],
+        &options,
+        1,
+        1,
+        &(),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("q = -1"), "{err}");
     let err = pmmh(&family, &prior(), &data, &[0.5, 1.0], &options, 1, 1, &()).unwrap_err();
     assert!(err.to_string().contains("expected 3"), "{err}");

@@ -34,7 +34,10 @@ impl LgssFamily {
     /// The linear Gaussian model at `theta` (for the Kalman filter's exact likelihood).
     pub fn linear_model(&self, theta: &[f64]) -> Result<LinearGaussianModel, String> {
         let [phi, q, r] = theta else {
-            return Err(format!("lgss has 3 parameters (phi, q, r), got {}", theta.len()));
+            return Err(format!(
+                "lgss has 3 parameters (phi, q, r), got {}",
+                theta.len()
+            ));
         };
         LinearGaussianModel::builder(dmatrix![*phi], dmatrix![1.0], dmatrix![*q], dmatrix![*r])
             .p1(dmatrix![self.p1])
@@ -81,7 +84,8 @@ pub struct LgssConjugate {
 
 /// A draw from `IG(shape, scale)` as the reciprocal of a `Gamma(shape, rate = scale)`.
 fn inverse_gamma(shape: f64, scale: f64, rng: &mut Rng) -> Result<f64, String> {
-    let gamma = Gamma::new(shape, 1.0 / scale).map_err(|e| format!("{e} (shape {shape}, scale {scale})"))?;
+    let gamma = Gamma::new(shape, 1.0 / scale)
+        .map_err(|e| format!("{e} (shape {shape}, scale {scale})"))?;
     Ok(1.0 / gamma.sample(rng))
 }
 
@@ -96,11 +100,19 @@ impl ParameterStep<LgssFamily> for LgssConjugate {
     ) -> Result<bool, String> {
         let (
             ScalarPrior::Normal { mean: m, sd: s },
-            ScalarPrior::InverseGamma { shape: aq, scale: bq },
-            ScalarPrior::InverseGamma { shape: ar, scale: br },
+            ScalarPrior::InverseGamma {
+                shape: aq,
+                scale: bq,
+            },
+            ScalarPrior::InverseGamma {
+                shape: ar,
+                scale: br,
+            },
         ) = (self.phi, self.q, self.r)
         else {
-            return Err("the conjugate lgss step needs phi ~ normal, q and r ~ inverse_gamma".into());
+            return Err(
+                "the conjugate lgss step needs phi ~ normal, q and r ~ inverse_gamma".into(),
+            );
         };
         let pairs = || x.iter().zip(&x[1..]);
         let q = theta[1];
@@ -116,7 +128,9 @@ impl ParameterStep<LgssFamily> for LgssConjugate {
             .iter()
             .enumerate()
             .filter(|&(t, _)| !data.is_missing(t))
-            .fold((0usize, 0.0), |(c, s), (t, &xt)| (c + 1, s + (data.output(t)[0] - xt).powi(2)));
+            .fold((0usize, 0.0), |(c, s), (t, &xt)| {
+                (c + 1, s + (data.output(t)[0] - xt).powi(2))
+            });
         let r = inverse_gamma(ar + 0.5 * count as f64, br + 0.5 * sr, rng)?;
         theta.copy_from_slice(&[phi, q, r]);
         Ok(true)
@@ -177,7 +191,10 @@ impl ModelFamily for NlbenchFamily {
     fn model(&self, theta: &[f64]) -> Result<Nlbench, String> {
         let expected = self.dim();
         if theta.len() != expected {
-            return Err(format!("nlbench has {expected} parameters, got {}", theta.len()));
+            return Err(format!(
+                "nlbench has {expected} parameters, got {}",
+                theta.len()
+            ));
         }
         let mut p = self.fixed;
         (p.a, p.b, p.c, p.d) = (theta[0], theta[1], theta[2], theta[3]);

@@ -7,8 +7,8 @@ use rand_distr::{Distribution, StandardNormal};
 use sysid_kalman::LinearGaussianModel;
 use sysid_linalg::{LinalgError, cholesky_upper};
 use sysid_smc::{
-    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
-    TransitionSampler,
+    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
+    TransitionDensity, TransitionSampler,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;

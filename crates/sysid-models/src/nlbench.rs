@@ -3,8 +3,8 @@
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_smc::{
-    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
-    TransitionSampler, stream,
+    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
+    TransitionDensity, TransitionSampler, stream,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;

@@ -120,8 +120,9 @@ pub fn summarise(chains: &[Chain]) -> Vec<ParameterSummary> {
             let mut pooled: Vec<f64> = draws.iter().flatten().copied().collect();
             let count = pooled.len() as f64;
             let mean = pooled.iter().sum::<f64>() / count;
-            let sd = (pooled.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (count - 1.0).max(1.0))
-                .sqrt();
+            let sd = (pooled.iter().map(|x| (x - mean).powi(2)).sum::<f64>()
+                / (count - 1.0).max(1.0))
+            .sqrt();
             let ess: f64 = draws.iter().map(|d| effective_sample_size(d)).sum();
             pooled.sort_by(f64::total_cmp);
             let quantile = |p: f64| {
@@ -171,7 +172,10 @@ mod tests {
             let expected = n as f64 * (1.0 - phi) / (1.0 + phi);
             let ess = effective_sample_size(&ar1(phi, n, 3));
             // the estimator's relative error is a few percent at this length
-            assert!((ess / expected - 1.0).abs() < 0.1, "phi {phi}: {ess} vs {expected}");
+            assert!(
+                (ess / expected - 1.0).abs() < 0.1,
+                "phi {phi}: {ess} vs {expected}"
+            );
         }
     }
 

@@ -44,7 +44,13 @@ impl Transform {
 
     /// `z` of `theta`, or the index of a parameter outside its support.
     pub(crate) fn to_unconstrained(&self, theta: &[f64], z: &mut [f64]) -> Result<(), usize> {
-        for (k, ((s, &v), zk)) in self.supports.iter().zip(theta).zip(z.iter_mut()).enumerate() {
+        for (k, ((s, &v), zk)) in self
+            .supports
+            .iter()
+            .zip(theta)
+            .zip(z.iter_mut())
+            .enumerate()
+        {
             if !s.contains(v) {
                 return Err(k);
             }
@@ -54,7 +60,7 @@ impl Transform {
     }
 
     /// `theta` of `z`, returning `log |d theta / d z|`.
-    pub(crate) fn from_unconstrained(&self, z: &[f64], theta: &mut [f64]) -> f64 {
+    pub(crate) fn to_constrained(&self, z: &[f64], theta: &mut [f64]) -> f64 {
         let mut log_jacobian = 0.0;
         for ((s, &zk), v) in self.supports.iter().zip(z).zip(theta.iter_mut()) {
             let (value, lj) = s.from_unconstrained(zk);

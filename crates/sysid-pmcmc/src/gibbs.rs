@@ -29,12 +29,12 @@
 //! Lindsten and Schön (2013), *Backward simulation methods for Monte Carlo statistical
 //! inference*.
 
-use rand_distr::{Distribution, StandardNormal};
 use rand::RngExt;
+use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use sysid_smc::{
-    ConditionalSmc, CsmcKernel, InitialDensity, ObservationDensity, Rng, Series,
-    TransitionDensity, stream,
+    ConditionalSmc, CsmcKernel, InitialDensity, ObservationDensity, Rng, Series, TransitionDensity,
+    stream,
 };
 
 use crate::family::{Transform, check_start};
@@ -154,7 +154,11 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     let mut previous = trajectory.clone();
     let mut changes = vec![0usize; steps];
     let mut state_sum = vec![0.0; steps * n];
-    let mut out = ChainRecorder::new(family.parameter_names(), options.iterations, options.burn_in);
+    let mut out = ChainRecorder::new(
+        family.parameter_names(),
+        options.iterations,
+        options.burn_in,
+    );
     for iteration in 0..options.iterations {
         let accepted = step
             .update(family, &mut theta, &trajectory, data, &mut rng)
@@ -175,7 +179,11 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
             .sample(&model, data, Some(&previous), &mut trajectory, &mut rng)
             .map_err(smc_error(iteration))?;
         if iteration >= options.burn_in {
-            for (t, (new, old)) in trajectory.chunks_exact(n).zip(previous.chunks_exact(n)).enumerate() {
+            for (t, (new, old)) in trajectory
+                .chunks_exact(n)
+                .zip(previous.chunks_exact(n))
+                .enumerate()
+            {
                 if new != old {
                     changes[t] += 1;
                 }
@@ -184,7 +192,13 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
                 *s += x;
             }
         }
-        out.push(&theta, &theta, sweep.loglik, prior.log_density(&theta), accepted);
+        out.push(
+            &theta,
+            &theta,
+            sweep.loglik,
+            prior.log_density(&theta),
+            accepted,
+        );
         observer.iteration(chain, iteration);
     }
     let kept = (options.iterations - options.burn_in) as f64;
@@ -273,7 +287,7 @@ where
         let mut proposal_theta = vec![0.0; d];
         let mut current = log_target(
             &current_theta,
-            transform.from_unconstrained(&z, &mut proposal_theta),
+            transform.to_constrained(&z, &mut proposal_theta),
         );
         let mut any = false;
         for _ in 0..self.sweeps {
@@ -281,7 +295,7 @@ where
                 let e: f64 = StandardNormal.sample(rng);
                 *p = zk + sd * e;
             }
-            let log_jacobian = transform.from_unconstrained(&proposal, &mut proposal_theta);
+            let log_jacobian = transform.to_constrained(&proposal, &mut proposal_theta);
             let candidate = log_target(&proposal_theta, log_jacobian);
             if rng.random::<f64>().ln() < candidate - current {
                 z.copy_from_slice(&proposal);

@@ -95,7 +95,11 @@ impl PmmhOptions {
                 found: self.proposal_sd.len(),
             });
         }
-        if let Some(v) = self.proposal_sd.iter().find(|v| !(**v > 0.0 && v.is_finite())) {
+        if let Some(v) = self
+            .proposal_sd
+            .iter()
+            .find(|v| !(**v > 0.0 && v.is_finite()))
+        {
             return Err(PmcmcError::InvalidOption {
                 name: "proposal_sd",
                 reason: format!("{v} is not a positive finite number"),
@@ -203,7 +207,7 @@ fn run_chain<F: ModelFamily, P: Prior>(
         .to_unconstrained(start, &mut z)
         .expect("the start was checked");
     let mut current = State {
-        log_jacobian: transform.from_unconstrained(&z, &mut vec![0.0; d]),
+        log_jacobian: transform.to_constrained(&z, &mut vec![0.0; d]),
         z,
         theta: start.to_vec(),
         log_likelihood: 0.0,
@@ -228,7 +232,11 @@ fn run_chain<F: ModelFamily, P: Prior>(
         }
     };
     let mut proposal = Proposal::new(options, d);
-    let mut out = ChainRecorder::new(family.parameter_names(), options.iterations, options.burn_in);
+    let mut out = ChainRecorder::new(
+        family.parameter_names(),
+        options.iterations,
+        options.burn_in,
+    );
     let mut candidate = current.clone();
     let mut noise = vec![0.0; d];
     for iteration in 0..options.iterations {
@@ -241,7 +249,7 @@ fn run_chain<F: ModelFamily, P: Prior>(
         proposal.step(&current.z, &noise, &mut candidate.z);
         let filter_seed = rng.random::<u64>();
         let uniform = rng.random::<f64>();
-        candidate.log_jacobian = transform.from_unconstrained(&candidate.z, &mut candidate.theta);
+        candidate.log_jacobian = transform.to_constrained(&candidate.z, &mut candidate.theta);
         candidate.log_prior = prior.log_density(&candidate.theta);
         let mut accepted = false;
         if candidate.log_prior > f64::NEG_INFINITY
@@ -264,7 +272,13 @@ fn run_chain<F: ModelFamily, P: Prior>(
                 accepted = true;
             }
         }
-        out.push(&current.theta, &current.z, current.log_likelihood, current.log_prior, accepted);
+        out.push(
+            &current.theta,
+            &current.z,
+            current.log_likelihood,
+            current.log_prior,
+            accepted,
+        );
         observer.iteration(chain, iteration);
     }
     Ok(out.finish())

@@ -87,19 +87,21 @@ impl ScalarPrior {
             reason,
         };
         let result = match *self {
-            ScalarPrior::Normal { mean, sd } => Normal::new(mean, sd).map(|_| ()).map_err(|e| e.to_string()),
-            ScalarPrior::LogNormal { mu, sigma } => {
-                LogNormal::new(mu, sigma).map(|_| ()).map_err(|e| e.to_string())
+            ScalarPrior::Normal { mean, sd } => {
+                Normal::new(mean, sd).map(|_| ()).map_err(|e| e.to_string())
             }
-            ScalarPrior::Gamma { shape, rate } => {
-                Gamma::new(shape, rate).map(|_| ()).map_err(|e| e.to_string())
-            }
+            ScalarPrior::LogNormal { mu, sigma } => LogNormal::new(mu, sigma)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            ScalarPrior::Gamma { shape, rate } => Gamma::new(shape, rate)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
             ScalarPrior::InverseGamma { shape, scale } => InverseGamma::new(shape, scale)
                 .map(|_| ())
                 .map_err(|e| e.to_string()),
-            ScalarPrior::Uniform { low, high } => {
-                Uniform::new(low, high).map(|_| ()).map_err(|e| e.to_string())
-            }
+            ScalarPrior::Uniform { low, high } => Uniform::new(low, high)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
             ScalarPrior::Beta { a, b } => Beta::new(a, b).map(|_| ()).map_err(|e| e.to_string()),
             ScalarPrior::Flat => Ok(()),
         };
@@ -127,7 +129,9 @@ impl ScalarPrior {
                 if theta <= 0.0 {
                     return f64::NEG_INFINITY;
                 }
-                InverseGamma::new(shape, scale).map(|d| d.ln_pdf(theta)).ok()
+                InverseGamma::new(shape, scale)
+                    .map(|d| d.ln_pdf(theta))
+                    .ok()
             }
             ScalarPrior::Uniform { low, high } => {
                 if !(theta > low && theta < high) {
@@ -141,7 +145,13 @@ impl ScalarPrior {
                 }
                 Beta::new(a, b).map(|d| d.ln_pdf(theta)).ok()
             }
-            ScalarPrior::Flat => return if theta.is_finite() { 0.0 } else { f64::NEG_INFINITY },
+            ScalarPrior::Flat => {
+                return if theta.is_finite() {
+                    0.0
+                } else {
+                    f64::NEG_INFINITY
+                };
+            }
         };
         value.unwrap_or(f64::NAN)
     }
@@ -197,14 +207,23 @@ mod tests {
         // (2 - 1)^2 / (2 * 2^2) = 0.125
         assert!((normal.log_density(2.0) - (-0.5 * LN_2PI - 2f64.ln() - 0.125)).abs() < 1e-12);
         // inverse gamma(shape 3, scale 2) at 0.5: 3 ln 2 - ln Gamma(3) - 4 ln 0.5 - 4
-        let ig = ScalarPrior::InverseGamma { shape: 3.0, scale: 2.0 };
+        let ig = ScalarPrior::InverseGamma {
+            shape: 3.0,
+            scale: 2.0,
+        };
         let closed = 3.0 * 2f64.ln() - 2f64.ln() - 4.0 * 0.5f64.ln() - 4.0;
         assert!((ig.log_density(0.5) - closed).abs() < 1e-12);
         // gamma(shape 2, rate 3) at 0.5: 2 ln 3 - ln Gamma(2) + ln 0.5 - 1.5
-        let g = ScalarPrior::Gamma { shape: 2.0, rate: 3.0 };
+        let g = ScalarPrior::Gamma {
+            shape: 2.0,
+            rate: 3.0,
+        };
         assert!((g.log_density(0.5) - (2.0 * 3f64.ln() + 0.5f64.ln() - 1.5)).abs() < 1e-12);
         assert_eq!(g.log_density(-1.0), f64::NEG_INFINITY);
-        let u = ScalarPrior::Uniform { low: -1.0, high: 1.0 };
+        let u = ScalarPrior::Uniform {
+            low: -1.0,
+            high: 1.0,
+        };
         assert!((u.log_density(0.3) + 2f64.ln()).abs() < 1e-15);
         assert_eq!(u.log_density(1.5), f64::NEG_INFINITY);
     }
@@ -212,8 +231,14 @@ mod tests {
     #[test]
     fn bad_hyperparameters_name_the_parameter() {
         let names = vec!["q".to_string()];
-        let err = IndependentPrior::new(&names, vec![ScalarPrior::Gamma { shape: -1.0, rate: 1.0 }])
-            .unwrap_err();
+        let err = IndependentPrior::new(
+            &names,
+            vec![ScalarPrior::Gamma {
+                shape: -1.0,
+                rate: 1.0,
+            }],
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("prior of `q`"), "{err}");
         let err = IndependentPrior::new(&names, vec![]).unwrap_err();
         assert!(matches!(err, PmcmcError::DimensionMismatch { .. }));
@@ -222,8 +247,15 @@ mod tests {
     #[test]
     fn priors_read_from_json() {
         let p: ScalarPrior =
-            serde_json::from_str(r#"{"family": "inverse_gamma", "shape": 2, "scale": 0.1}"#).unwrap();
-        assert_eq!(p, ScalarPrior::InverseGamma { shape: 2.0, scale: 0.1 });
+            serde_json::from_str(r#"{"family": "inverse_gamma", "shape": 2, "scale": 0.1}"#)
+                .unwrap();
+        assert_eq!(
+            p,
+            ScalarPrior::InverseGamma {
+                shape: 2.0,
+                scale: 0.1
+            }
+        );
         assert!(serde_json::from_str::<ScalarPrior>(r#"{"family": "normal", "mean": 0}"#).is_err());
     }
 }

@@ -86,8 +86,9 @@ mod tests {
             let (back, log_jac) = support.from_unconstrained(z);
             assert!((back - theta).abs() < 1e-12, "{support:?}");
             let h = 1e-6;
-            let derivative =
-                (support.from_unconstrained(z + h).0 - support.from_unconstrained(z - h).0) / (2.0 * h);
+            let derivative = (support.from_unconstrained(z + h).0
+                - support.from_unconstrained(z - h).0)
+                / (2.0 * h);
             assert!((derivative.ln() - log_jac).abs() < 1e-6, "{support:?}");
         }
         assert!(!Support::Positive.contains(0.0));

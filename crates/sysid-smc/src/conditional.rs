@@ -215,7 +215,10 @@ impl ConditionalSmc {
         let mut index: Vec<usize> = (0..m).collect();
         let mut next = vec![0.0; m * n];
         let mut current = vec![0.0; m * n];
-        let final_weights: Vec<f64> = self.log_weights[last * m..].iter().map(|l| l.exp()).collect();
+        let final_weights: Vec<f64> = self.log_weights[last * m..]
+            .iter()
+            .map(|l| l.exp())
+            .collect();
         for t in (0..=last).rev() {
             for (x, &i) in current.chunks_exact_mut(n).zip(&index) {
                 x.copy_from_slice(self.state(t, i));
@@ -334,13 +337,19 @@ impl ConditionalSmc {
             if data.is_missing(t) {
                 log_w.copy_from_slice(&carried);
             } else {
-                model.log_observations(t, data.input(t), data.output(t), current, &mut self.log_obs);
+                model.log_observations(
+                    t,
+                    data.input(t),
+                    data.output(t),
+                    current,
+                    &mut self.log_obs,
+                );
                 for ((l, &c), &g) in log_w.iter_mut().zip(&carried).zip(&self.log_obs) {
                     *l = c + g;
                 }
             }
-            let increment = normalise_log_weights(log_w, &mut self.weights)
-                .unwrap_or(f64::NEG_INFINITY);
+            let increment =
+                normalise_log_weights(log_w, &mut self.weights).unwrap_or(f64::NEG_INFINITY);
             if !increment.is_finite() {
                 return Err(weight_failure(&self.log_obs, increment, t));
             }
@@ -357,7 +366,10 @@ impl ConditionalSmc {
     fn draw_final<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> Result<usize, SmcError> {
         let m = self.particles;
         let last = self.steps - 1;
-        let weights: Vec<f64> = self.log_weights[last * m..].iter().map(|l| l.exp()).collect();
+        let weights: Vec<f64> = self.log_weights[last * m..]
+            .iter()
+            .map(|l| l.exp())
+            .collect();
         Ok(find_cumulative(&weights, rng.random::<f64>()))
     }
 
@@ -393,7 +405,11 @@ impl ConditionalSmc {
                 &mut self.draws,
                 &mut self.scratch,
             );
-            for (d, &lw) in self.draws.iter_mut().zip(&self.log_weights[t * m..(t + 1) * m]) {
+            for (d, &lw) in self
+                .draws
+                .iter_mut()
+                .zip(&self.log_weights[t * m..(t + 1) * m])
+            {
                 *d += lw;
             }
             k = draw_from_log_weights(&mut self.draws, rng.random::<f64>())

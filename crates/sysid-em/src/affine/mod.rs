@@ -27,10 +27,12 @@
 
 mod model;
 mod mstep;
+mod psaem;
 mod stats;
 
 pub use model::{AffineModel, AffineParams};
 pub use mstep::m_step;
+pub use psaem::{Psaem, StepSizes};
 pub use stats::{AffineStatistics, StatisticsCollector};
 
 use crate::EmAlgorithm;

@@ -46,9 +46,10 @@ pub enum CliError {
     },
     #[error("{path}: {message}")]
     Csv { path: PathBuf, message: String },
-    #[error("{path}, line {line}, column {column}: invalid model JSON: {message}")]
+    #[error("{path}, line {line}, column {column}: invalid {what} JSON: {message}")]
     Json {
         path: PathBuf,
+        what: &'static str,
         line: usize,
         column: usize,
         message: String,
@@ -80,6 +81,11 @@ pub enum CliError {
     AffineEm {
         context: String,
         source: sysid::em::affine::AffineEmError,
+    },
+    #[error("{context}: {source}")]
+    Pmcmc {
+        context: String,
+        source: sysid::pmcmc::PmcmcError,
     },
     #[error("the data have {found} {what} columns but the model has {expected}")]
     ColumnCount {
@@ -122,6 +128,14 @@ impl CliError {
                 | AffineEmError::NoSteps { .. } => true,
                 _ => false,
             },
+            CliError::Pmcmc { source, .. } => {
+                use sysid::pmcmc::PmcmcError;
+                match source {
+                    PmcmcError::Smc { source, .. } => smc_input(source),
+                    PmcmcError::ParameterStep { .. } => false,
+                    _ => true,
+                }
+            }
             _ => true,
         };
         if bad_input {

@@ -41,14 +41,12 @@ pub fn write_output(path: &Path, force: bool, contents: &str) -> Result<(), CliE
         })
 }
 
-/// Reads and validates a model file (JSON, `docs/model-format.md`).
-pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+/// The error of a JSON file `path` (a `what` file) that does not parse: its line,
+/// column and serde's message without serde's own position suffix.
+pub fn json_error(path: &Path, what: &'static str, e: &serde_json::Error) -> CliError {
+    CliError::Json {
         path: path.to_path_buf(),
-        source,
-    })?;
-    let spec: ModelSpec = serde_json::from_str(&text).map_err(|e| CliError::Json {
-        path: path.to_path_buf(),
+        what,
         line: e.line(),
         column: e.column(),
         message: e
@@ -57,7 +55,16 @@ pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
             .next()
             .unwrap_or_default()
             .to_string(),
+    }
+}
+
+/// Reads and validates a model file (JSON, `docs/model-format.md`).
+pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
     })?;
+    let spec: ModelSpec = serde_json::from_str(&text).map_err(|e| json_error(path, "model", &e))?;
     spec.build().map_err(|source| CliError::Model {
         path: path.to_path_buf(),
         source,

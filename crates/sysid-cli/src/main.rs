@@ -7,6 +7,8 @@
 //! sysid simulate nlbench --steps 1000 --seed 1 --out nl.csv
 //! sysid pf --system nlbench --data nl.csv --particles 1000 --out filtered.csv
 //! sysid psmooth --system nlbench --data nl.csv --method ffbsi-reject --paths 100 --out smoothed.csv
+//! sysid pmmh --system nlbench --data nl.csv --iters 10000 --particles 100 --chains 4 --out chains.csv
+//! sysid pgas --system lgss --data lg.csv --iters 5000 --particles 10 --kernel as
 //! ```
 //! Errors are one line on stderr and a non-zero exit code; existing files are never
 //! replaced without `--force`.
@@ -68,6 +70,12 @@ enum Command {
     /// Particle smoother (Tanizaki, FFBSi, rejection FFBSi, genealogy): smoothed means
     /// and standard deviations.
     Psmooth(commands::particle::SmoothArgs),
+    /// Particle marginal Metropolis-Hastings: posterior of a canonical system's
+    /// parameters (several chains in parallel, diagnostics, draws as CSV).
+    Pmmh(commands::pmcmc::PmmhArgs),
+    /// Particle Gibbs with ancestor sampling (or backward simulation, or plain):
+    /// posterior of the parameters and the states.
+    Pgas(commands::pmcmc::PgasArgs),
     /// Smooth the states (RTS) and write their means and standard deviations as CSV.
     Smooth {
         /// Model file (JSON, see docs/model-format.md).
@@ -114,6 +122,8 @@ fn main() -> ExitCode {
         Command::Fit(options) => commands::fit::run(&options),
         Command::Pf(options) => commands::particle::run_filter(&options),
         Command::Psmooth(options) => commands::particle::run_smoother(&options),
+        Command::Pmmh(options) => commands::pmcmc::run_pmmh(&options),
+        Command::Pgas(options) => commands::pmcmc::run_pgas(&options),
         Command::Loglik { model, data, json } => commands::loglik::run(&model, &data, json),
         Command::Smooth {
             model,

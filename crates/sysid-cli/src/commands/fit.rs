@@ -50,6 +50,11 @@ pub struct Options {
     /// peaked).
     #[arg(long, default_value = "tanizaki")]
     pub smoother: String,
+    /// Particle fits: `em` (particle EM with --smoother, seed 000) or `psaem`
+    /// (stochastic-approximation EM with a conditional particle filter with ancestor
+    /// sampling, Lindsten 2013; 15 particles are usually enough).
+    #[arg(long, default_value = "em")]
+    pub method: String,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

@@ -16,9 +16,11 @@ use super::particle::series_of;
 use crate::error::CliError;
 use crate::files::{DataFile, read_model, write_output};
 use std::path::Path;
-use sysid::em::affine::{AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams};
+use sysid::em::affine::{
+    AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, Psaem, StepSizes,
+};
 use sysid::em::linear::Covariance;
-use sysid::em::{EmObserver, EmOptions, IterationInfo, Termination, run_em};
+use sysid::em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
 use sysid::kalman::ModelSpec;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
 use sysid::smc::{FfbsiReject, Smoother, Tanizaki};
@@ -179,7 +181,31 @@ where
     A::Smc: sysid::smc::TransitionBound,
     F: Fn(&AffineParams) -> Vec<f64>,
 {
-    match job.o.smoother.as_str() {
+    let o = job.o;
+    let context = o.data.data.display().to_string();
+    let series = series_of(&job.file, &context)?;
+    match o.method.as_str() {
+        "em" => {}
+        "psaem" => {
+            let psaem = Psaem::new(
+                model,
+                series,
+                o.particles,
+                StepSizes::default(),
+                spec,
+                o.seed,
+            )
+            .map_err(affine_error(&context))?;
+            return fit_with_algorithm(job, model, start, row, psaem, "psaem");
+        }
+        other => {
+            return Err(bad(
+                "--method",
+                format!("unknown method {other:?} (known: em, psaem)"),
+            ));
+        }
+    }
+    match o.smoother.as_str() {
         "tanizaki" => fit_with_smoother(job, model, start, spec, row, Tanizaki::default()),
         "ffbsi-reject" => {
             let smoother = FfbsiReject {
@@ -257,9 +283,28 @@ where
     let o = job.o;
     let context = o.data.data.display().to_string();
     let series = series_of(&job.file, &context)?;
-    let names = model.names(&start);
-    let mut em = AffineEm::new(model, series, o.particles, smoother, spec, o.seed)
+    let em = AffineEm::new(model, series, o.particles, smoother, spec, o.seed)
         .map_err(affine_error(&context))?;
+    fit_with_algorithm(job, model, start, row, em, &o.smoother)
+}
+
+/// Runs a particle EM variant, writes the estimate and the trace, and reports.
+fn fit_with_algorithm<A, F, E>(
+    job: &Job,
+    model: &A,
+    start: AffineParams,
+    row: F,
+    mut em: E,
+    method: &str,
+) -> Result<(), CliError>
+where
+    A: AffineModel + ParamNames,
+    F: Fn(&AffineParams) -> Vec<f64>,
+    E: EmAlgorithm<Estimate = AffineParams, Error = AffineEmError>,
+{
+    let o = job.o;
+    let context = o.data.data.display().to_string();
+    let names = model.names(&start);
     let mut trace = ParamTrace {
         row,
         rows: Vec::new(),
@@ -275,7 +320,7 @@ where
     // nlbench result records how it was obtained.
     if json.get("system").is_some() {
         json["particle_em"] = serde_json::json!({
-        "iterations": result.iterations, "particles": o.particles, "smoother": o.smoother,
+        "iterations": result.iterations, "particles": o.particles, "method": method,
         "seed": o.seed, "loglik_estimate": result.loglik,
         "likelihood_decreases": result.decreases,
         });
@@ -303,7 +348,7 @@ where
                 result.iterations,
                 result.elapsed.as_secs_f64(),
                 o.particles,
-                o.smoother,
+                method,
                 result.loglik.unwrap_or(f64::NEG_INFINITY),
                 o.out.display()
             )

@@ -6,6 +6,7 @@ pub mod fix;
 pub mod loglik;
 pub mod n4sid;
 pub mod particle;
+pub mod pmcmc;
 pub mod simulate;
 pub mod smooth;
 

@@ -138,7 +138,7 @@ fn read_series(a: &ParticleArgs, outputs: usize, inputs: usize) -> Result<DataFi
     Ok(file)
 }
 
-fn pool(threads: usize) -> Result<rayon::ThreadPool, CliError> {
+pub(crate) fn pool(threads: usize) -> Result<rayon::ThreadPool, CliError> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

@@ -1,0 +1,522 @@
+//! `sysid pmmh` and `sysid pgas`: Bayesian identification of a canonical system's
+//! parameters (`lgss`: phi, q, r; `nlbench`: a, b, c, d [, q, r]) from a data file.
+//!
+//! Default priors (override any of them with `--prior FILE`, a JSON object from
+//! parameter name to a prior such as `{"q": {"family": "inverse_gamma", "shape": 2,
+//! "scale": 1}}`):
+//! - lgss: phi ~ N(0, 1), q ~ IG(2, 1), r ~ IG(2, 0.5) (conjugate, so `pgas` can use the
+//!   exact Gibbs step);
+//! - nlbench: a, d ~ N(0, 10^2), b, c ~ N(0, 100^2), q ~ IG(1, 0.01), r ~ IG(1, 0.1).
+
+use super::particle::series_of;
+use crate::DataArgs;
+use crate::error::CliError;
+use crate::files::{create_output, fmt, json_error};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+use sysid::models::{LgssConjugate, LgssFamily, NlbenchFamily};
+use sysid::pmcmc::{
+    Chain, CsmcKernel, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily,
+    PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, pmmh, summarise,
+};
+use sysid::smc::Resampling;
+
+/// Options shared by `pmmh` and `pgas`.
+#[derive(clap::Args, Debug)]
+pub struct ChainArgs {
+    /// Canonical system: lgss (phi, q, r) or nlbench (a, b, c, d; with
+    /// --estimate-noise also q, r).
+    #[arg(long)]
+    pub system: String,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Iterations per chain, burn-in included.
+    #[arg(long, visible_alias = "iters", default_value_t = 10_000)]
+    pub iterations: usize,
+    /// Leading iterations left out of the summary (default: a fifth of --iters).
+    #[arg(long)]
+    pub burn_in: Option<usize>,
+    /// Number of chains (run in parallel; the result does not depend on --threads).
+    #[arg(long, default_value_t = 4)]
+    pub chains: usize,
+    /// Particles M (default: 100 for pmmh, 10 for pgas).
+    #[arg(long)]
+    pub particles: Option<usize>,
+    /// Prior file (JSON: parameter name -> prior); unlisted parameters keep the
+    /// default prior.
+    #[arg(long)]
+    pub prior: Option<PathBuf>,
+    /// Starting parameters, comma separated, in the system's order (default: the
+    /// canonical system's values; lgss starts at 0.5, 1, 1).
+    #[arg(long, value_delimiter = ',')]
+    pub start: Option<Vec<f64>>,
+    /// nlbench: also sample the noise variances q and r.
+    #[arg(long)]
+    pub estimate_noise: bool,
+    /// Seed: chain c uses the random stream (seed, c).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads (the chains are identical for any number).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Write every draw as CSV (chain, iteration, burn_in, parameters, loglik,
+    /// log_prior, accepted).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print the summary as one JSON line.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `sysid pmmh`.
+#[derive(clap::Args, Debug)]
+pub struct PmmhArgs {
+    #[command(flatten)]
+    pub common: ChainArgs,
+    /// Random-walk standard deviations on the unconstrained scale (log for
+    /// variances), comma separated; default 0.1 each.
+    #[arg(long, value_delimiter = ',')]
+    pub proposal_sd: Option<Vec<f64>>,
+    /// Keep the initial proposal (no adaptation during burn-in).
+    #[arg(long)]
+    pub no_adapt: bool,
+}
+
+/// Options of `sysid pgas`.
+#[derive(clap::Args, Debug)]
+pub struct PgasArgs {
+    #[command(flatten)]
+    pub common: ChainArgs,
+    /// Conditional SMC kernel: as (ancestor sampling), bs (backward simulation) or
+    /// plain.
+    #[arg(long, default_value = "as")]
+    pub kernel: String,
+    /// Parameter step: conjugate (exact; lgss only) or mh (random-walk
+    /// Metropolis-within-Gibbs). Default: conjugate for lgss, mh for nlbench.
+    #[arg(long)]
+    pub step: Option<String>,
+    /// Metropolis-within-Gibbs: proposal standard deviations (unconstrained scale).
+    #[arg(long, value_delimiter = ',')]
+    pub proposal_sd: Option<Vec<f64>>,
+}
+
+fn bad(option: &'static str, message: impl Into<String>) -> CliError {
+    CliError::BadOption {
+        option,
+        message: message.into(),
+    }
+}
+
+fn pmcmc_error(context: &str) -> impl Fn(PmcmcError) -> CliError + '_ {
+    move |source| CliError::Pmcmc {
+        context: context.to_string(),
+        source,
+    }
+}
+
+fn default_priors(system: &str) -> Vec<(&'static str, ScalarPrior)> {
+    let normal = |sd: f64| ScalarPrior::Normal { mean: 0.0, sd };
+    let ig = |shape: f64, scale: f64| ScalarPrior::InverseGamma { shape, scale };
+    match system {
+        "lgss" => vec![
+            ("phi", normal(1.0)),
+            ("q", ig(2.0, 1.0)),
+            ("r", ig(2.0, 0.5)),
+        ],
+        _ => vec![
+            ("a", normal(10.0)),
+            ("b", normal(100.0)),
+            ("c", normal(100.0)),
+            ("d", normal(10.0)),
+            ("q", ig(1.0, 0.01)),
+            ("r", ig(1.0, 0.1)),
+        ],
+    }
+}
+
+/// The priors of `names`: the defaults, replaced by the entries of the prior file.
+fn priors(a: &ChainArgs, names: &[String]) -> Result<IndependentPrior, CliError> {
+    let defaults = default_priors(&a.system);
+    let mut chosen: Vec<ScalarPrior> = names
+        .iter()
+        .map(|n| {
+            defaults
+                .iter()
+                .find(|(d, _)| d == n)
+                .expect("a default for every name")
+                .1
+        })
+        .collect();
+    if let Some(path) = &a.prior {
+        let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let file: BTreeMap<String, ScalarPrior> =
+            serde_json::from_str(&text).map_err(|e| json_error(path, "prior", &e))?;
+        for (name, prior) in file {
+            let k = names.iter().position(|n| *n == name).ok_or_else(|| {
+                bad(
+                    "--prior",
+                    format!(
+                        "{}: unknown parameter {name:?} (the {} parameters are {})",
+                        path.display(),
+                        a.system,
+                        names.join(", ")
+                    ),
+                )
+            })?;
+            chosen[k] = prior;
+        }
+    }
+    IndependentPrior::new(names, chosen).map_err(pmcmc_error(
+        &a.prior
+            .as_ref()
+            .map_or("default prior".into(), |p| p.display().to_string()),
+    ))
+}
+
+fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
+    if a.chains == 0 {
+        return Err(bad("--chains", "must be at least 1"));
+    }
+    if a.threads == 0 {
+        return Err(bad("--threads", "must be at least 1"));
+    }
+    let burn_in = a.burn_in.unwrap_or(a.iterations / 5);
+    if burn_in >= a.iterations {
+        return Err(bad(
+            "--burn-in",
+            format!(
+                "{burn_in} leaves no draws out of {} iterations",
+                a.iterations
+            ),
+        ));
+    }
+    Ok(burn_in)
+}
+
+fn start_of<F: ModelFamily>(
+    a: &ChainArgs,
+    family: &F,
+    default: Vec<f64>,
+) -> Result<Vec<f64>, CliError> {
+    let start = a.start.clone().unwrap_or(default);
+    if start.len() != family.dim() {
+        return Err(bad(
+            "--start",
+            format!(
+                "{} values given, {} has {} parameters ({})",
+                start.len(),
+                a.system,
+                family.dim(),
+                family.parameter_names().join(", ")
+            ),
+        ));
+    }
+    Ok(start)
+}
+
+/// `sysid pmmh`.
+pub fn run_pmmh(a: &PmmhArgs) -> Result<(), CliError> {
+    let c = &a.common;
+    match c.system.as_str() {
+        "lgss" => pmmh_with(a, &LgssFamily::default(), vec![0.5, 1.0, 1.0]),
+        "nlbench" => {
+            let family = NlbenchFamily {
+                estimate_noise: c.estimate_noise,
+                ..NlbenchFamily::default()
+            };
+            pmmh_with(a, &family, family.truth())
+        }
+        other => Err(CliError::UnknownSystem {
+            name: other.into(),
+            known: "lgss, nlbench".into(),
+        }),
+    }
+}
+
+fn pmmh_with<F: ModelFamily>(
+    a: &PmmhArgs,
+    family: &F,
+    default_start: Vec<f64>,
+) -> Result<(), CliError> {
+    let c = &a.common;
+    let burn_in = check_common(c)?;
+    let names = family.parameter_names();
+    let prior = priors(c, &names)?;
+    let start = start_of(c, family, default_start)?;
+    let file = c.data.read()?;
+    super::check_column_counts(&file, 0, 1)?;
+    let context = c.data.data.display().to_string();
+    let series = series_of(&file, &context)?;
+    let options = PmmhOptions {
+        iterations: c.iterations,
+        burn_in,
+        particles: c.particles.unwrap_or(100),
+        resampling: Resampling::Systematic,
+        proposal_sd: a.proposal_sd.clone().unwrap_or_default(),
+        adapt: !a.no_adapt,
+    };
+    let started = std::time::Instant::now();
+    let chains = super::particle::pool(c.threads)?
+        .install(|| {
+            pmmh(
+                family,
+                &prior,
+                &series,
+                &start,
+                &options,
+                c.chains,
+                c.seed,
+                &(),
+            )
+        })
+        .map_err(pmcmc_error(&context))?;
+    finish(
+        c,
+        "pmmh",
+        options.particles,
+        &chains,
+        started.elapsed().as_secs_f64(),
+    )
+}
+
+/// `sysid pgas`.
+pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
+    let c = &a.common;
+    let kernel = CsmcKernel::from_name(&a.kernel).ok_or_else(|| {
+        bad(
+            "--kernel",
+            format!("unknown kernel {:?} (known: as, bs, plain)", a.kernel),
+        )
+    })?;
+    let step = a.step.clone().unwrap_or_else(|| {
+        if c.system == "lgss" {
+            "conjugate"
+        } else {
+            "mh"
+        }
+        .to_string()
+    });
+    match (c.system.as_str(), step.as_str()) {
+        ("lgss", "conjugate") => {
+            let family = LgssFamily::default();
+            let prior = priors(c, &family.parameter_names())?;
+            let [phi, q, r] = prior.priors() else {
+                unreachable!("three lgss priors")
+            };
+            let conjugate = LgssConjugate {
+                phi: *phi,
+                q: *q,
+                r: *r,
+            };
+            if !matches!(
+                (phi, q, r),
+                (
+                    ScalarPrior::Normal { .. },
+                    ScalarPrior::InverseGamma { .. },
+                    ScalarPrior::InverseGamma { .. }
+                )
+            ) {
+                return Err(bad(
+                    "--step",
+                    "the conjugate lgss step needs phi ~ normal and q, r ~ inverse_gamma priors (or use --step mh)",
+                ));
+            }
+            pgas_with(a, &family, &prior, &conjugate, kernel, vec![0.5, 1.0, 1.0])
+        }
+        ("lgss", "mh") => {
+            let family = LgssFamily::default();
+            let prior = priors(c, &family.parameter_names())?;
+            let step = mh_step(a, &prior, family.dim())?;
+            pgas_with(a, &family, &prior, &step, kernel, vec![0.5, 1.0, 1.0])
+        }
+        ("nlbench", "mh") => {
+            let family = NlbenchFamily {
+                estimate_noise: c.estimate_noise,
+                ..NlbenchFamily::default()
+            };
+            let prior = priors(c, &family.parameter_names())?;
+            let step = mh_step(a, &prior, family.dim())?;
+            pgas_with(a, &family, &prior, &step, kernel, family.truth())
+        }
+        ("lgss" | "nlbench", other) => Err(bad(
+            "--step",
+            format!(
+                "{other:?} is not available for {} (known: conjugate for lgss, mh)",
+                c.system
+            ),
+        )),
+        (other, _) => Err(CliError::UnknownSystem {
+            name: other.into(),
+            known: "lgss, nlbench".into(),
+        }),
+    }
+}
+
+fn mh_step(
+    a: &PgasArgs,
+    prior: &IndependentPrior,
+    dim: usize,
+) -> Result<MetropolisWithinGibbs<IndependentPrior>, CliError> {
+    let sd = a.proposal_sd.clone().unwrap_or_else(|| vec![0.05; dim]);
+    if sd.len() != dim || sd.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+        return Err(bad(
+            "--proposal-sd",
+            format!("needs {dim} positive finite values, got {sd:?}"),
+        ));
+    }
+    Ok(MetropolisWithinGibbs {
+        prior: prior.clone(),
+        proposal_sd: sd,
+        sweeps: 5,
+    })
+}
+
+fn pgas_with<F, S>(
+    a: &PgasArgs,
+    family: &F,
+    prior: &IndependentPrior,
+    step: &S,
+    kernel: CsmcKernel,
+    default_start: Vec<f64>,
+) -> Result<(), CliError>
+where
+    F: ModelFamily,
+    S: sysid::pmcmc::ParameterStep<F>,
+{
+    let c = &a.common;
+    let burn_in = check_common(c)?;
+    let start = start_of(c, family, default_start)?;
+    let file = c.data.read()?;
+    super::check_column_counts(&file, 0, 1)?;
+    let context = c.data.data.display().to_string();
+    let series = series_of(&file, &context)?;
+    let options = GibbsOptions {
+        iterations: c.iterations,
+        burn_in,
+        particles: c.particles.unwrap_or(10),
+        kernel,
+    };
+    let started = std::time::Instant::now();
+    let chains = super::particle::pool(c.threads)?
+        .install(|| {
+            particle_gibbs(
+                family,
+                prior,
+                step,
+                &series,
+                &start,
+                &options,
+                c.chains,
+                c.seed,
+                &(),
+            )
+        })
+        .map_err(pmcmc_error(&context))?;
+    finish(
+        c,
+        "pgas",
+        options.particles,
+        &chains,
+        started.elapsed().as_secs_f64(),
+    )
+}
+
+/// Writes the draws and prints the summary.
+fn finish(
+    a: &ChainArgs,
+    command: &str,
+    particles: usize,
+    chains: &[Chain],
+    seconds: f64,
+) -> Result<(), CliError> {
+    if let Some(path) = &a.out {
+        write_chains(path, a.force, chains)?;
+    }
+    let summary = summarise(chains);
+    let acceptance: Vec<f64> = chains.iter().map(Chain::acceptance_rate).collect();
+    let iterations = (a.iterations * chains.len()) as f64;
+    let mut min_update_rate = None;
+    for c in chains {
+        if let Some(rates) = &c.state_update_rate {
+            let low = rates.iter().copied().fold(f64::INFINITY, f64::min);
+            min_update_rate = Some(min_update_rate.map_or(low, |m: f64| m.min(low)));
+        }
+    }
+    crate::report(
+        a.json,
+        serde_json::json!({
+            "command": command, "system": a.system, "chains": chains.len(),
+            "iterations": a.iterations, "burn_in": chains[0].burn_in, "particles": particles,
+            "seed": a.seed, "acceptance": acceptance, "summary": summary,
+            "min_state_update_rate": min_update_rate,
+            "seconds": seconds, "ms_per_iteration": 1e3 * seconds * a.threads.min(chains.len()) as f64 / iterations,
+            "out": a.out,
+        }),
+        || {
+            let mut lines = vec![format!(
+                "{command}: {} chains x {} iterations ({} burn-in, {particles} particles) in {seconds:.2} s; acceptance {}",
+                chains.len(),
+                a.iterations,
+                chains[0].burn_in,
+                acceptance
+                    .iter()
+                    .map(|v| format!("{v:.3}"))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            )];
+            lines.push(format!(
+                "{:>6} {:>12} {:>12} {:>10} {:>8} {:>7} {:>12} {:>12}",
+                "param", "mean", "sd", "mcse", "ess", "rhat", "q05", "q95"
+            ));
+            for s in &summary {
+                lines.push(format!(
+                    "{:>6} {:>12.6} {:>12.6} {:>10.2e} {:>8.0} {:>7.3} {:>12.6} {:>12.6}",
+                    s.name, s.mean, s.sd, s.mcse, s.ess, s.rhat, s.q05, s.q95
+                ));
+            }
+            if let Some(r) = min_update_rate {
+                lines.push(format!("lowest per-step state update rate {r:.3}"));
+            }
+            lines.join("\n")
+        },
+    );
+    Ok(())
+}
+
+fn write_chains(path: &std::path::Path, force: bool, chains: &[Chain]) -> Result<(), CliError> {
+    let mut w = create_output(path, force)?;
+    let io = |source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let names = &chains[0].names;
+    writeln!(
+        w,
+        "chain,iteration,burn_in,{},loglik,log_prior,accepted",
+        names.join(",")
+    )
+    .map_err(io)?;
+    for (k, c) in chains.iter().enumerate() {
+        for i in 0..c.iterations() {
+            let values: Vec<String> = c.sample(i).iter().map(|&v| fmt(v)).collect();
+            writeln!(
+                w,
+                "{k},{i},{},{},{},{},{}",
+                u8::from(i < c.burn_in),
+                values.join(","),
+                fmt(c.log_likelihood[i]),
+                fmt(c.log_prior[i]),
+                u8::from(c.accepted[i])
+            )
+            .map_err(io)?;
+        }
+    }
+    w.flush().map_err(io)
+}

@@ -1,0 +1,275 @@
+//! `sysid pmmh` and `sysid pgas` end to end: the draws equal the library's bit for bit
+//! and do not depend on --threads; PGAS lands near lgss's truth; bad options, priors and
+//! starts give one-line errors and leave no file; `fit nlbench --method psaem` runs.
+
+mod common;
+use common::{assert_one_line_error, s, scratch_dir, sysid};
+use sysid::models::{LgssConjugate, LgssFamily, System};
+use sysid::pmcmc::{
+    CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, ScalarPrior, particle_gibbs,
+};
+use sysid::smc::Series;
+
+fn lgss_data(dir: &std::path::Path, steps: usize) -> (std::path::PathBuf, Vec<f64>) {
+    let data = dir.join("lg.csv");
+    let out = sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        &steps.to_string(),
+        "--seed",
+        "3",
+        "--out",
+        s(&data),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let sim = System::Lgss.simulate(steps, 3).unwrap();
+    (data, sim.record.y.as_slice().to_vec())
+}
+
+fn json_of(out: &std::process::Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn pgas_equals_the_library_for_any_thread_count_and_finds_the_truth() {
+    let dir = scratch_dir();
+    let (data, y) = lgss_data(&dir, 300);
+    let run = |threads: &str, out: &std::path::Path| {
+        sysid(&[
+            "pgas",
+            "--system",
+            "lgss",
+            "--data",
+            s(&data),
+            "--iters",
+            "1500",
+            "--chains",
+            "3",
+            "--seed",
+            "5",
+            "--threads",
+            threads,
+            "--out",
+            s(out),
+            "--json",
+        ])
+    };
+    let (one, two) = (dir.join("one.csv"), dir.join("two.csv"));
+    let summary = json_of(&run("1", &one));
+    json_of(&run("2", &two));
+    let text = std::fs::read_to_string(&one).unwrap();
+    assert_eq!(text, std::fs::read_to_string(&two).unwrap());
+    // the library with the CLI's default prior gives the same draws
+    let family = LgssFamily::default();
+    let priors = vec![
+        ScalarPrior::Normal { mean: 0.0, sd: 1.0 },
+        ScalarPrior::InverseGamma {
+            shape: 2.0,
+            scale: 1.0,
+        },
+        ScalarPrior::InverseGamma {
+            shape: 2.0,
+            scale: 0.5,
+        },
+    ];
+    let prior = IndependentPrior::new(&family.parameter_names(), priors.clone()).unwrap();
+    let step = LgssConjugate {
+        phi: priors[0],
+        q: priors[1],
+        r: priors[2],
+    };
+    let chains = particle_gibbs(
+        &family,
+        &prior,
+        &step,
+        &Series::new(&y, 1).unwrap(),
+        &[0.5, 1.0, 1.0],
+        &GibbsOptions {
+            iterations: 1500,
+            burn_in: 300,
+            particles: 10,
+            kernel: CsmcKernel::AncestorSampling,
+        },
+        3,
+        5,
+        &(),
+    )
+    .unwrap();
+    let last = text.lines().last().unwrap();
+    let fields: Vec<f64> = last.split(',').map(|v| v.parse().unwrap()).collect();
+    assert_eq!(&fields[3..6], chains[2].sample(1499), "CSV row vs library");
+    // posterior means near the truth (phi 0.9, q 1, r 0.5) on 300 steps
+    let means: Vec<f64> = summary["summary"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["mean"].as_f64().unwrap())
+        .collect();
+    for (m, truth) in means.iter().zip([0.9, 1.0, 0.5]) {
+        assert!(
+            (m - truth).abs() < 0.35 * truth,
+            "posterior mean {m} vs {truth}"
+        );
+    }
+}
+
+#[test]
+fn pmmh_runs_and_reports_acceptance_and_diagnostics() {
+    let dir = scratch_dir();
+    let (data, _) = lgss_data(&dir, 100);
+    let summary = json_of(&sysid(&[
+        "pmmh",
+        "--system",
+        "lgss",
+        "--data",
+        s(&data),
+        "--iters",
+        "600",
+        "--chains",
+        "2",
+        "--particles",
+        "50",
+        "--json",
+    ]));
+    assert_eq!(summary["acceptance"].as_array().unwrap().len(), 2);
+    for p in summary["summary"].as_array().unwrap() {
+        assert!(p["ess"].as_f64().unwrap() > 1.0 && p["rhat"].as_f64().unwrap().is_finite());
+    }
+}
+
+#[test]
+fn bad_pmcmc_input_gives_one_line_errors_and_no_file() {
+    let dir = scratch_dir();
+    let (data, _) = lgss_data(&dir, 50);
+    let out = dir.join("chains.csv");
+    let prior = dir.join("prior.json");
+    let base = ["--system", "lgss", "--data", s(&data), "--out", s(&out)];
+    let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
+        (
+            vec!["pmmh", "--iters", "10", "--burn-in", "10"],
+            vec!["--burn-in", "leaves no draws"],
+        ),
+        (vec!["pmmh", "--chains", "0"], vec!["--chains"]),
+        (
+            vec!["pmmh", "--start", "0.5,1"],
+            vec!["--start", "3 parameters"],
+        ),
+        (
+            vec!["pmmh", "--start", "0.5,-1,1", "--iters", "10"],
+            vec!["q = -1"],
+        ),
+        (
+            vec!["pmmh", "--proposal-sd", "0.1,0,0.1", "--iters", "10"],
+            vec!["proposal_sd"],
+        ),
+        (
+            vec!["pgas", "--kernel", "xx"],
+            vec!["--kernel", "as, bs, plain"],
+        ),
+        (
+            vec!["pgas", "--particles", "1", "--iters", "10"],
+            vec!["at least 2 particles"],
+        ),
+        (vec!["pgas", "--step", "gibbs"], vec!["--step"]),
+        (
+            vec!["pmmh", "--prior", s(&prior), "--iters", "10"],
+            vec!["prior.json", "line 1"],
+        ),
+    ];
+    std::fs::write(&prior, r#"{"q": {"family": "gamma", "shape": 1}}"#).unwrap();
+    for (head, needles) in cases {
+        let mut args = head.clone();
+        args.extend(base);
+        assert_one_line_error(&sysid(&args), &needles);
+        assert!(!out.exists(), "{head:?} left a file");
+    }
+    std::fs::write(&prior, r#"{"sigma": {"family": "flat"}}"#).unwrap();
+    let mut args = vec!["pmmh", "--prior", s(&prior)];
+    args.extend(base);
+    assert_one_line_error(&sysid(&args), &["unknown parameter \"sigma\"", "phi, q, r"]);
+    std::fs::write(
+        &prior,
+        r#"{"q": {"family": "gamma", "shape": -1, "rate": 1}}"#,
+    )
+    .unwrap();
+    assert_one_line_error(&sysid(&args), &["prior of `q`"]);
+    let mut args = vec![
+        "pgas",
+        "--system",
+        "lgss",
+        "--data",
+        s(&data),
+        "--prior",
+        s(&prior),
+    ];
+    std::fs::write(
+        &prior,
+        r#"{"q": {"family": "gamma", "shape": 2, "rate": 1}}"#,
+    )
+    .unwrap();
+    args.extend(["--iters", "10"]);
+    assert_one_line_error(&sysid(&args), &["conjugate", "--step mh"]);
+}
+
+#[test]
+fn fit_nlbench_by_psaem_runs() {
+    let dir = scratch_dir();
+    let data = dir.join("nl.csv");
+    assert!(
+        sysid(&[
+            "simulate",
+            "nlbench",
+            "--steps",
+            "200",
+            "--seed",
+            "2",
+            "--out",
+            s(&data)
+        ])
+        .status
+        .success()
+    );
+    let fit = dir.join("fit.json");
+    let summary = json_of(&sysid(&[
+        "fit",
+        "nlbench",
+        "--method",
+        "psaem",
+        "--data",
+        s(&data),
+        "--iters",
+        "30",
+        "--particles",
+        "15",
+        "--out",
+        s(&fit),
+        "--json",
+    ]));
+    assert_eq!(summary["iterations"], 30);
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fit).unwrap()).unwrap();
+    assert_eq!(model["particle_em"]["method"], "psaem");
+    assert_one_line_error(
+        &sysid(&[
+            "fit",
+            "nlbench",
+            "--method",
+            "mcmc",
+            "--data",
+            s(&data),
+            "--out",
+            s(&dir.join("x.json")),
+        ]),
+        &["--method", "em, psaem"],
+    );
+}

@@ -6,12 +6,14 @@
 //! cargo run --release -p sysid-bench -- kalman [--reps 21]
 //! cargo run --release -p sysid-bench -- smc [--reps 21]
 //! cargo run --release -p sysid-bench -- nlbench-em [--runs 200 --iters 1000 --particles 50 --shard 0/2]
+//! cargo run --release -p sysid-bench -- pmcmc [--reps 11]
 //! ```
 
 mod em;
 mod kalman;
 mod lti2x2;
 mod nlbench_em;
+mod pmcmc;
 mod smc;
 
 use clap::{Parser, Subcommand};
@@ -52,6 +54,13 @@ enum Runner {
         #[arg(long, default_value_t = 21)]
         reps: usize,
     },
+    /// PMMH and particle Gibbs: iteration times, chain throughput, and the lgss
+    /// posterior against an exact-likelihood chain.
+    Pmcmc {
+        /// Repetitions of the timings; medians are reported.
+        #[arg(long, default_value_t = 11)]
+        reps: usize,
+    },
     /// Seed-000 particle-EM study on nlbench (one JSON line per run, then a summary).
     NlbenchEm(nlbench_em::Args),
     /// Merges the outputs of `nlbench-em` shards into one set of run lines and summary.
@@ -86,6 +95,7 @@ fn main() {
         Runner::Kalman { reps, system } => kalman::run(reps.max(1), system.as_deref()),
         Runner::Em { reps } => em::run(reps.max(1)),
         Runner::Smc { reps } => smc::run(reps.max(1)),
+        Runner::Pmcmc { reps } => pmcmc::run(reps.max(1)),
         Runner::NlbenchEm(args) => nlbench_em::run(&args).unwrap_or_else(|e| exit_with(&e)),
         Runner::NlbenchEmMerge { files } => {
             nlbench_em::merge(&files).unwrap_or_else(|e| exit_with(&e));

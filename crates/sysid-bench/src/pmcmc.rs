@@ -1,0 +1,253 @@
+//! `pmcmc` runner: the speed targets of the Bayesian issue and a posterior check.
+//!
+//! - `pmmh_iteration`: one PMMH iteration on `nlbench` (M = 100, T = 1000), one thread:
+//!   the median over repetitions of (time of a 100-iteration chain) / 100;
+//! - `pgas_iteration`: one particle-Gibbs iteration (ancestor sampling, M = 10, T = 1000)
+//!   on `lgss` with the conjugate step;
+//! - `pmmh_chains_throughput`: 2 chains on 1 and on 2 threads (the speed-up);
+//! - `pmcmc_lgss_posterior`: PMMH and PGAS posterior means and sds of (phi, q, r) on an
+//!   `lgss` record of T = 100 against an exact-likelihood (Kalman) Metropolis chain,
+//!   with the ESS of each.
+
+use crate::emit;
+use serde_json::json;
+use std::time::Instant;
+use sysid::kalman::KalmanWorkspace;
+use sysid::models::{LgssConjugate, LgssFamily, Nlbench, NlbenchFamily, System};
+use sysid::pmcmc::{
+    CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, Prior, ScalarPrior,
+    effective_sample_size, particle_gibbs, pmmh, summarise,
+};
+use sysid::smc::{Series, stream};
+
+const PRIORS: [ScalarPrior; 3] = [
+    ScalarPrior::Normal { mean: 0.0, sd: 1.0 },
+    ScalarPrior::InverseGamma {
+        shape: 2.0,
+        scale: 1.0,
+    },
+    ScalarPrior::InverseGamma {
+        shape: 2.0,
+        scale: 0.5,
+    },
+];
+
+fn lgss_prior() -> IndependentPrior {
+    IndependentPrior::new(&LgssFamily::default().parameter_names(), PRIORS.to_vec())
+        .expect("valid priors")
+}
+
+fn conjugate() -> LgssConjugate {
+    LgssConjugate {
+        phi: PRIORS[0],
+        q: PRIORS[1],
+        r: PRIORS[2],
+    }
+}
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a thread pool")
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    crate::summary(&mut v).0
+}
+
+/// Runs every task with `reps` repetitions for the timings.
+pub fn run(reps: usize) {
+    let one = pool(1);
+    // PMMH on nlbench, M = 100, T = 1000
+    let sim = Nlbench::truth().simulate(1000, 1);
+    let nl = Series::new(&sim.outputs, 1).expect("finite");
+    let family = NlbenchFamily::default();
+    let nl_prior = IndependentPrior::new(
+        &family.parameter_names(),
+        vec![ScalarPrior::Flat; family.dim()],
+    )
+    .expect("flat");
+    let iterations = 100;
+    let pmmh_options = PmmhOptions {
+        iterations,
+        burn_in: 1,
+        particles: 100,
+        ..Default::default()
+    };
+    let ms: Vec<f64> = (0..reps as u64)
+        .map(|r| {
+            let start = Instant::now();
+            one.install(|| {
+                pmmh(
+                    &family,
+                    &nl_prior,
+                    &nl,
+                    &family.truth(),
+                    &pmmh_options,
+                    1,
+                    r,
+                    &(),
+                )
+            })
+            .expect("runs");
+            start.elapsed().as_secs_f64() * 1e3 / iterations as f64
+        })
+        .collect();
+    let pmmh_ms = median(ms);
+    emit(
+        &json!({"task": "pmmh_iteration", "params": {"system": "nlbench", "T": 1000, "M": 100, "threads": 1},
+        "ms_median": pmmh_ms, "target_ms": 2.0, "met": pmmh_ms <= 2.0}),
+    );
+
+    // PGAS on lgss, M = 10, T = 1000
+    let lg = System::Lgss.simulate(1000, 1).expect("simulates");
+    let y = lg.record.y.as_slice().to_vec();
+    let lg_series = Series::new(&y, 1).expect("finite");
+    let gibbs = GibbsOptions {
+        iterations,
+        burn_in: 1,
+        particles: 10,
+        kernel: CsmcKernel::AncestorSampling,
+    };
+    let ms: Vec<f64> = (0..reps as u64)
+        .map(|r| {
+            let start = Instant::now();
+            one.install(|| {
+                particle_gibbs(
+                    &LgssFamily::default(),
+                    &lgss_prior(),
+                    &conjugate(),
+                    &lg_series,
+                    &[0.5, 1.0, 1.0],
+                    &gibbs,
+                    1,
+                    r,
+                    &(),
+                )
+            })
+            .expect("runs");
+            start.elapsed().as_secs_f64() * 1e3 / iterations as f64
+        })
+        .collect();
+    emit(
+        &json!({"task": "pgas_iteration", "params": {"system": "lgss", "T": 1000, "M": 10, "threads": 1},
+        "ms_median": median(ms)}),
+    );
+
+    // throughput of 2 chains on 1 and 2 threads
+    let chains_seconds = |threads: usize| {
+        let p = pool(threads);
+        let start = Instant::now();
+        p.install(|| {
+            pmmh(
+                &family,
+                &nl_prior,
+                &nl,
+                &family.truth(),
+                &pmmh_options,
+                2,
+                9,
+                &(),
+            )
+        })
+        .expect("runs");
+        start.elapsed().as_secs_f64()
+    };
+    let (serial, parallel) = (chains_seconds(1), chains_seconds(2));
+    emit(
+        &json!({"task": "pmmh_chains_throughput", "params": {"system": "nlbench", "chains": 2, "iterations": iterations, "M": 100},
+        "seconds_1_thread": serial, "seconds_2_threads": parallel, "speedup": serial / parallel}),
+    );
+
+    posterior_check();
+    emit(&json!({"task": "pmcmc_summary", "params": {"reps": reps},
+        "pmmh_ms_per_iteration": pmmh_ms, "pmmh_target_ms": 2.0,
+        "chains_speedup_2_threads": serial / parallel}));
+}
+
+/// PMMH and PGAS against an exact-likelihood random-walk Metropolis chain on lgss.
+fn posterior_check() {
+    let sim = System::Lgss.simulate(100, 5).expect("simulates");
+    let y = sim.record.y.as_slice().to_vec();
+    let data = Series::new(&y, 1).expect("finite");
+    let family = LgssFamily::default();
+    let prior = lgss_prior();
+    // exact chain on (phi, ln q, ln r)
+    let mut ws = KalmanWorkspace::new();
+    let mut log_target = |z: &[f64; 3]| {
+        let theta = [z[0], z[1].exp(), z[2].exp()];
+        let model = family.linear_model(&theta).expect("valid");
+        ws.loglik(&model, &sim.record).expect("finite") + prior.log_density(&theta) + z[1] + z[2]
+    };
+    let mut rng = stream(1, 0);
+    let (mut z, steps) = ([0.9, 0.0, (0.5f64).ln()], [0.05, 0.35, 0.35]);
+    let mut current = log_target(&z);
+    let mut draws = vec![Vec::new(); 3];
+    for i in 0..200_000 {
+        use rand::RngExt;
+        let mut proposal = z;
+        for (p, s) in proposal.iter_mut().zip(steps) {
+            let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
+            *p += s * e;
+        }
+        let candidate = log_target(&proposal);
+        if rng.random::<f64>().ln() < candidate - current {
+            (z, current) = (proposal, candidate);
+        }
+        if i >= 20_000 {
+            for (d, v) in draws.iter_mut().zip([z[0], z[1].exp(), z[2].exp()]) {
+                d.push(v);
+            }
+        }
+    }
+    let exact: Vec<serde_json::Value> = draws
+        .iter()
+        .map(|d| {
+            let n = d.len() as f64;
+            let mean = d.iter().sum::<f64>() / n;
+            let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            json!({"mean": mean, "sd": sd, "ess": effective_sample_size(d)})
+        })
+        .collect();
+    let start = [0.5, 1.0, 1.0];
+    let pmmh_chains = pmmh(
+        &family,
+        &prior,
+        &data,
+        &start,
+        &PmmhOptions {
+            iterations: 6_000,
+            burn_in: 1_000,
+            particles: 100,
+            ..Default::default()
+        },
+        4,
+        7,
+        &(),
+    )
+    .expect("runs");
+    let pgas_chains = particle_gibbs(
+        &family,
+        &prior,
+        &conjugate(),
+        &data,
+        &start,
+        &GibbsOptions {
+            iterations: 6_000,
+            burn_in: 1_000,
+            particles: 10,
+            kernel: CsmcKernel::AncestorSampling,
+        },
+        4,
+        8,
+        &(),
+    )
+    .expect("runs");
+    emit(
+        &json!({"task": "pmcmc_lgss_posterior", "params": {"T": 100, "chains": 4, "iterations": 6000, "burn_in": 1000,
+            "pmmh_M": 100, "pgas_M": 10, "exact_iterations": 200_000},
+        "exact": exact, "pmmh": summarise(&pmmh_chains), "pgas": summarise(&pgas_chains),
+        "pmmh_acceptance": pmmh_chains.iter().map(|c| c.acceptance_rate()).collect::<Vec<_>>()}),
+    );
+}

@@ -4,13 +4,11 @@
 //! mixes with 10 particles where plain particle Gibbs degenerates; chains are
 //! bit-identical for any thread count.
 
-use rand::RngExt;
-use rand_distr::{Distribution, StandardNormal};
 use sysid::kalman::{KalmanWorkspace, Record};
 use sysid::models::{LgssConjugate, LgssFamily, LinearGaussianSmc, System, lgss};
 use sysid::pmcmc::{
     Chain, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily, ParameterStep,
-    PmmhOptions, ScalarPrior, effective_sample_size, particle_gibbs, pmmh, summarise,
+    PmmhOptions, effective_sample_size, particle_gibbs, pmmh, summarise,
 };
 use sysid::smc::{ConditionalSmc, CsmcKernel, Rng, Series, stream};
 
@@ -20,68 +18,31 @@ fn lgss_data(steps: usize, seed: u64) -> (Record, Vec<f64>) {
     (sim.record, y)
 }
 
-const PHI_PRIOR: ScalarPrior = ScalarPrior::Normal { mean: 0.0, sd: 1.0 };
-const Q_PRIOR: ScalarPrior = ScalarPrior::InverseGamma {
-    shape: 2.0,
-    scale: 1.0,
-};
-const R_PRIOR: ScalarPrior = ScalarPrior::InverseGamma {
-    shape: 2.0,
-    scale: 0.5,
-};
-
 fn prior() -> IndependentPrior {
     IndependentPrior::new(
         &LgssFamily::default().parameter_names(),
-        vec![PHI_PRIOR, Q_PRIOR, R_PRIOR],
+        LgssFamily::DEFAULT_PRIORS.to_vec(),
     )
     .unwrap()
 }
 
 fn conjugate() -> LgssConjugate {
-    LgssConjugate {
-        phi: PHI_PRIOR,
-        q: Q_PRIOR,
-        r: R_PRIOR,
-    }
+    LgssConjugate::from_priors(&LgssFamily::DEFAULT_PRIORS).unwrap()
 }
 
-/// Posterior mean, sd and ESS of one parameter from an independent random-walk
-/// Metropolis chain on `(phi, ln q, ln r)` with the Kalman filter's exact likelihood.
+/// Posterior mean, sd and ESS of each parameter from the exact-likelihood (Kalman)
+/// random-walk Metropolis chain.
 fn exact_posterior(record: &Record, iterations: usize, seed: u64) -> Vec<(f64, f64, f64)> {
-    use sysid::pmcmc::Prior;
-    let family = LgssFamily::default();
-    let prior = prior();
-    let mut ws = KalmanWorkspace::new();
-    let mut log_target = |z: &[f64; 3]| -> f64 {
-        let theta = [z[0], z[1].exp(), z[2].exp()];
-        let model = family.linear_model(&theta).unwrap();
-        ws.loglik(&model, record).unwrap() + prior.log_density(&theta) + z[1] + z[2]
-    };
-    let mut rng = stream(seed, 0);
-    let mut z = [0.9, 0.0, (0.5f64).ln()];
-    let mut current = log_target(&z);
-    let steps = [0.05, 0.35, 0.35];
-    let burn_in = iterations / 10;
-    let mut draws = vec![Vec::new(); 3];
-    for i in 0..iterations {
-        let mut proposal = z;
-        for (p, s) in proposal.iter_mut().zip(steps) {
-            let e: f64 = StandardNormal.sample(&mut rng);
-            *p += s * e;
-        }
-        let candidate = log_target(&proposal);
-        if rng.random::<f64>().ln() < candidate - current {
-            z = proposal;
-            current = candidate;
-        }
-        if i >= burn_in {
-            draws[0].push(z[0]);
-            draws[1].push(z[1].exp());
-            draws[2].push(z[2].exp());
-        }
-    }
-    draws
+    LgssFamily::default()
+        .exact_posterior_draws(
+            &prior(),
+            record,
+            [0.9, 1.0, 0.5],
+            iterations,
+            iterations / 10,
+            seed,
+        )
+        .unwrap()
         .iter()
         .map(|d| {
             let n = d.len() as f64;

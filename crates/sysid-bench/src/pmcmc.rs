@@ -12,37 +12,35 @@
 use crate::emit;
 use serde_json::json;
 use std::time::Instant;
-use sysid::kalman::KalmanWorkspace;
 use sysid::models::{LgssConjugate, LgssFamily, Nlbench, NlbenchFamily, System};
 use sysid::pmcmc::{
-    CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, Prior, ScalarPrior,
+    CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior,
     effective_sample_size, particle_gibbs, pmmh, summarise,
 };
-use sysid::smc::{Series, stream};
-
-const PRIORS: [ScalarPrior; 3] = [
-    ScalarPrior::Normal { mean: 0.0, sd: 1.0 },
-    ScalarPrior::InverseGamma {
-        shape: 2.0,
-        scale: 1.0,
-    },
-    ScalarPrior::InverseGamma {
-        shape: 2.0,
-        scale: 0.5,
-    },
-];
+use sysid::smc::Series;
 
 fn lgss_prior() -> IndependentPrior {
-    IndependentPrior::new(&LgssFamily::default().parameter_names(), PRIORS.to_vec())
-        .expect("valid priors")
+    IndependentPrior::new(
+        &LgssFamily::default().parameter_names(),
+        LgssFamily::DEFAULT_PRIORS.to_vec(),
+    )
+    .expect("valid priors")
 }
 
 fn conjugate() -> LgssConjugate {
-    LgssConjugate {
-        phi: PRIORS[0],
-        q: PRIORS[1],
-        r: PRIORS[2],
-    }
+    LgssConjugate::from_priors(&LgssFamily::DEFAULT_PRIORS).expect("conjugate priors")
+}
+
+/// Median over `reps` seeded runs of `run(seed)`'s time divided by `iterations`, in ms.
+fn ms_per_iteration(reps: usize, iterations: usize, mut run: impl FnMut(u64)) -> f64 {
+    let ms: Vec<f64> = (0..reps as u64)
+        .map(|r| {
+            let start = Instant::now();
+            run(r);
+            start.elapsed().as_secs_f64() * 1e3 / iterations as f64
+        })
+        .collect();
+    median(ms)
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {
@@ -75,26 +73,20 @@ pub fn run(reps: usize) {
         particles: 100,
         ..Default::default()
     };
-    let ms: Vec<f64> = (0..reps as u64)
-        .map(|r| {
-            let start = Instant::now();
-            one.install(|| {
-                pmmh(
-                    &family,
-                    &nl_prior,
-                    &nl,
-                    &family.truth(),
-                    &pmmh_options,
-                    1,
-                    r,
-                    &(),
-                )
-            })
-            .expect("runs");
-            start.elapsed().as_secs_f64() * 1e3 / iterations as f64
-        })
-        .collect();
-    let pmmh_ms = median(ms);
+    let run_pmmh = |chains: usize, seed: u64| {
+        pmmh(
+            &family,
+            &nl_prior,
+            &nl,
+            &family.truth(),
+            &pmmh_options,
+            chains,
+            seed,
+            &(),
+        )
+        .expect("runs");
+    };
+    let pmmh_ms = ms_per_iteration(reps, iterations, |r| one.install(|| run_pmmh(1, r)));
     emit(
         &json!({"task": "pmmh_iteration", "params": {"system": "nlbench", "T": 1000, "M": 100, "threads": 1},
         "ms_median": pmmh_ms, "target_ms": 2.0, "met": pmmh_ms <= 2.0}),
@@ -110,48 +102,32 @@ pub fn run(reps: usize) {
         particles: 10,
         kernel: CsmcKernel::AncestorSampling,
     };
-    let ms: Vec<f64> = (0..reps as u64)
-        .map(|r| {
-            let start = Instant::now();
-            one.install(|| {
-                particle_gibbs(
-                    &LgssFamily::default(),
-                    &lgss_prior(),
-                    &conjugate(),
-                    &lg_series,
-                    &[0.5, 1.0, 1.0],
-                    &gibbs,
-                    1,
-                    r,
-                    &(),
-                )
-            })
-            .expect("runs");
-            start.elapsed().as_secs_f64() * 1e3 / iterations as f64
+    let ms = ms_per_iteration(reps, iterations, |r| {
+        one.install(|| {
+            particle_gibbs(
+                &LgssFamily::default(),
+                &lgss_prior(),
+                &conjugate(),
+                &lg_series,
+                &[0.5, 1.0, 1.0],
+                &gibbs,
+                1,
+                r,
+                &(),
+            )
         })
-        .collect();
+        .expect("runs");
+    });
     emit(
         &json!({"task": "pgas_iteration", "params": {"system": "lgss", "T": 1000, "M": 10, "threads": 1},
-        "ms_median": median(ms)}),
+        "ms_median": ms}),
     );
 
     // throughput of 2 chains on 1 and 2 threads
     let chains_seconds = |threads: usize| {
         let p = pool(threads);
         let start = Instant::now();
-        p.install(|| {
-            pmmh(
-                &family,
-                &nl_prior,
-                &nl,
-                &family.truth(),
-                &pmmh_options,
-                2,
-                9,
-                &(),
-            )
-        })
-        .expect("runs");
+        p.install(|| run_pmmh(2, 9));
         start.elapsed().as_secs_f64()
     };
     let (serial, parallel) = (chains_seconds(1), chains_seconds(2));
@@ -173,34 +149,9 @@ fn posterior_check() {
     let data = Series::new(&y, 1).expect("finite");
     let family = LgssFamily::default();
     let prior = lgss_prior();
-    // exact chain on (phi, ln q, ln r)
-    let mut ws = KalmanWorkspace::new();
-    let mut log_target = |z: &[f64; 3]| {
-        let theta = [z[0], z[1].exp(), z[2].exp()];
-        let model = family.linear_model(&theta).expect("valid");
-        ws.loglik(&model, &sim.record).expect("finite") + prior.log_density(&theta) + z[1] + z[2]
-    };
-    let mut rng = stream(1, 0);
-    let (mut z, steps) = ([0.9, 0.0, (0.5f64).ln()], [0.05, 0.35, 0.35]);
-    let mut current = log_target(&z);
-    let mut draws = vec![Vec::new(); 3];
-    for i in 0..200_000 {
-        use rand::RngExt;
-        let mut proposal = z;
-        for (p, s) in proposal.iter_mut().zip(steps) {
-            let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
-            *p += s * e;
-        }
-        let candidate = log_target(&proposal);
-        if rng.random::<f64>().ln() < candidate - current {
-            (z, current) = (proposal, candidate);
-        }
-        if i >= 20_000 {
-            for (d, v) in draws.iter_mut().zip([z[0], z[1].exp(), z[2].exp()]) {
-                d.push(v);
-            }
-        }
-    }
+    let draws = family
+        .exact_posterior_draws(&prior, &sim.record, [0.9, 1.0, 0.5], 200_000, 20_000, 1)
+        .expect("finite likelihoods");
     let exact: Vec<serde_json::Value> = draws
         .iter()
         .map(|d| {

@@ -3,7 +3,7 @@
 //! options with one-line errors.
 
 mod common;
-use common::{assert_one_line_error, s, scratch_dir, sysid};
+use common::{assert_one_line_error, s, scratch_dir, simulate, sysid};
 use sysid::em::affine::{AffineEm, AffineEmSpec};
 use sysid::em::linear::Covariance;
 use sysid::em::{EmOptions, run_em};
@@ -12,24 +12,8 @@ use sysid::smc::{Series, Tanizaki};
 
 /// Simulates `nlbench` through the CLI and returns the data file and its outputs.
 fn nlbench_data(dir: &std::path::Path, steps: usize, seed: u64) -> (std::path::PathBuf, Vec<f64>) {
-    let data = dir.join("nl.csv");
-    let out = sysid(&[
-        "simulate",
-        "nlbench",
-        "--steps",
-        &steps.to_string(),
-        "--seed",
-        &seed.to_string(),
-        "--out",
-        s(&data),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let sim = Nlbench::truth().simulate(steps, seed);
-    (data, sim.outputs)
+    let data = simulate(dir, "nlbench", steps, seed);
+    (data, Nlbench::truth().simulate(steps, seed).outputs)
 }
 
 #[test]

@@ -2,16 +2,7 @@
 //! linear model path against the exact log-likelihood, and one-line errors.
 
 mod common;
-use common::{assert_one_line_error, s, scratch_dir, sysid};
-
-fn json_of(out: &std::process::Output) -> serde_json::Value {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
+use common::{assert_one_line_error, json_of, s, scratch_dir, sysid};
 
 #[test]
 fn pf_and_psmooth_on_nlbench_are_reproducible_across_thread_counts() {

@@ -3,41 +3,15 @@
 //! starts give one-line errors and leave no file; `fit nlbench --method psaem` runs.
 
 mod common;
-use common::{assert_one_line_error, s, scratch_dir, sysid};
+use common::{assert_one_line_error, json_of, s, scratch_dir, simulate, sysid};
 use sysid::models::{LgssConjugate, LgssFamily, System};
-use sysid::pmcmc::{
-    CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, ScalarPrior, particle_gibbs,
-};
+use sysid::pmcmc::{CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, particle_gibbs};
 use sysid::smc::Series;
 
 fn lgss_data(dir: &std::path::Path, steps: usize) -> (std::path::PathBuf, Vec<f64>) {
-    let data = dir.join("lg.csv");
-    let out = sysid(&[
-        "simulate",
-        "lgss",
-        "--steps",
-        &steps.to_string(),
-        "--seed",
-        "3",
-        "--out",
-        s(&data),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let data = simulate(dir, "lgss", steps, 3);
     let sim = System::Lgss.simulate(steps, 3).unwrap();
     (data, sim.record.y.as_slice().to_vec())
-}
-
-fn json_of(out: &std::process::Output) -> serde_json::Value {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
 }
 
 #[test]
@@ -71,17 +45,7 @@ fn pgas_equals_the_library_for_any_thread_count_and_finds_the_truth() {
     assert_eq!(text, std::fs::read_to_string(&two).unwrap());
     // the library with the CLI's default prior gives the same draws
     let family = LgssFamily::default();
-    let priors = vec![
-        ScalarPrior::Normal { mean: 0.0, sd: 1.0 },
-        ScalarPrior::InverseGamma {
-            shape: 2.0,
-            scale: 1.0,
-        },
-        ScalarPrior::InverseGamma {
-            shape: 2.0,
-            scale: 0.5,
-        },
-    ];
+    let priors = LgssFamily::DEFAULT_PRIORS.to_vec();
     let prior = IndependentPrior::new(&family.parameter_names(), priors.clone()).unwrap();
     let step = LgssConjugate {
         phi: priors[0],
@@ -224,21 +188,7 @@ fn bad_pmcmc_input_gives_one_line_errors_and_no_file() {
 #[test]
 fn fit_nlbench_by_psaem_runs() {
     let dir = scratch_dir();
-    let data = dir.join("nl.csv");
-    assert!(
-        sysid(&[
-            "simulate",
-            "nlbench",
-            "--steps",
-            "200",
-            "--seed",
-            "2",
-            "--out",
-            s(&data)
-        ])
-        .status
-        .success()
-    );
+    let data = simulate(&dir, "nlbench", 200, 2);
     let fit = dir.join("fit.json");
     let summary = json_of(&sysid(&[
         "fit",

@@ -1,10 +1,11 @@
 //! The canonical systems as parametrised families for the Bayesian samplers of
 //! `sysid-pmcmc`, with an exact conjugate parameter step for `lgss`.
 
-use rand_distr::{Distribution, Gamma, Normal};
-use sysid_kalman::LinearGaussianModel;
-use sysid_pmcmc::{ModelFamily, ParameterStep, ScalarPrior, Support};
-use sysid_smc::{Rng, Series};
+use rand::RngExt;
+use rand_distr::{Distribution, Gamma, Normal, StandardNormal};
+use sysid_kalman::{KalmanWorkspace, LinearGaussianModel, Record};
+use sysid_pmcmc::{ModelFamily, ParameterStep, Prior, ScalarPrior, Support};
+use sysid_smc::{Rng, Series, stream};
 
 use crate::{LinearGaussianSmc, Nlbench, NlbenchParams};
 use nalgebra::dmatrix;
@@ -31,6 +32,66 @@ impl Default for LgssFamily {
 }
 
 impl LgssFamily {
+    /// The default priors of `(phi, q, r)`: `N(0, 1)`, `IG(2, 1)`, `IG(2, 0.5)`
+    /// (conjugate, so [`LgssConjugate`] applies).
+    pub const DEFAULT_PRIORS: [ScalarPrior; 3] = [
+        ScalarPrior::Normal { mean: 0.0, sd: 1.0 },
+        ScalarPrior::InverseGamma {
+            shape: 2.0,
+            scale: 1.0,
+        },
+        ScalarPrior::InverseGamma {
+            shape: 2.0,
+            scale: 0.5,
+        },
+    ];
+
+    /// The posterior draws (after `burn_in`) of an exact-likelihood random-walk
+    /// Metropolis chain on `(phi, ln q, ln r)` (steps 0.05, 0.35, 0.35) from `start`:
+    /// the Kalman filter's log-likelihood replaces the particle estimate. The reference
+    /// for the particle samplers. Returns one vector of draws per parameter.
+    pub fn exact_posterior_draws<P: Prior>(
+        &self,
+        prior: &P,
+        record: &Record,
+        start: [f64; 3],
+        iterations: usize,
+        burn_in: usize,
+        seed: u64,
+    ) -> Result<Vec<Vec<f64>>, String> {
+        let mut ws = KalmanWorkspace::new();
+        let mut log_target = |z: &[f64; 3]| -> Result<f64, String> {
+            let theta = [z[0], z[1].exp(), z[2].exp()];
+            let model = self.linear_model(&theta)?;
+            let loglik = ws.loglik(&model, record).map_err(|e| e.to_string())?;
+            Ok(loglik + prior.log_density(&theta) + z[1] + z[2])
+        };
+        let mut rng = stream(seed, 0);
+        let mut z = [start[0], start[1].ln(), start[2].ln()];
+        let mut current = log_target(&z)?;
+        let steps = [0.05, 0.35, 0.35];
+        let mut draws: Vec<Vec<f64>> = (0..3)
+            .map(|_| Vec::with_capacity(iterations.saturating_sub(burn_in)))
+            .collect();
+        for i in 0..iterations {
+            let mut proposal = z;
+            for (p, s) in proposal.iter_mut().zip(steps) {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                *p += s * e;
+            }
+            let candidate = log_target(&proposal)?;
+            if rng.random::<f64>().ln() < candidate - current {
+                (z, current) = (proposal, candidate);
+            }
+            if i >= burn_in {
+                for (d, v) in draws.iter_mut().zip([z[0], z[1].exp(), z[2].exp()]) {
+                    d.push(v);
+                }
+            }
+        }
+        Ok(draws)
+    }
+
     /// The linear Gaussian model at `theta` (for the Kalman filter's exact likelihood).
     pub fn linear_model(&self, theta: &[f64]) -> Result<LinearGaussianModel, String> {
         let [phi, q, r] = theta else {
@@ -80,6 +141,27 @@ pub struct LgssConjugate {
     pub q: ScalarPrior,
     /// Prior of `r` (must be `InverseGamma`).
     pub r: ScalarPrior,
+}
+
+impl LgssConjugate {
+    /// The conjugate step for priors `[phi, q, r]`, or why they are not conjugate
+    /// (phi must be normal, q and r inverse gamma).
+    pub fn from_priors(priors: &[ScalarPrior]) -> Result<Self, String> {
+        match priors {
+            [
+                phi @ ScalarPrior::Normal { .. },
+                q @ ScalarPrior::InverseGamma { .. },
+                r @ ScalarPrior::InverseGamma { .. },
+            ] => Ok(LgssConjugate {
+                phi: *phi,
+                q: *q,
+                r: *r,
+            }),
+            _ => Err(
+                "the conjugate lgss step needs phi ~ normal and q, r ~ inverse_gamma priors".into(),
+            ),
+        }
+    }
 }
 
 /// A draw from `IG(shape, scale)` as the reciprocal of a `Gamma(shape, rate = scale)`.

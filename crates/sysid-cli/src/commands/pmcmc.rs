@@ -122,11 +122,10 @@ fn default_priors(system: &str) -> Vec<(&'static str, ScalarPrior)> {
     let normal = |sd: f64| ScalarPrior::Normal { mean: 0.0, sd };
     let ig = |shape: f64, scale: f64| ScalarPrior::InverseGamma { shape, scale };
     match system {
-        "lgss" => vec![
-            ("phi", normal(1.0)),
-            ("q", ig(2.0, 1.0)),
-            ("r", ig(2.0, 0.5)),
-        ],
+        "lgss" => ["phi", "q", "r"]
+            .into_iter()
+            .zip(LgssFamily::DEFAULT_PRIORS)
+            .collect(),
         _ => vec![
             ("a", normal(10.0)),
             ("b", normal(100.0)),
@@ -221,6 +220,31 @@ fn start_of<F: ModelFamily>(
     Ok(start)
 }
 
+/// What both samplers need before they run: the burn-in, the start and the data.
+struct Prepared {
+    burn_in: usize,
+    start: Vec<f64>,
+    file: crate::files::DataFile,
+    context: String,
+}
+
+fn prepare<F: ModelFamily>(
+    a: &ChainArgs,
+    family: &F,
+    default_start: Vec<f64>,
+) -> Result<Prepared, CliError> {
+    let burn_in = check_common(a)?;
+    let start = start_of(a, family, default_start)?;
+    let file = a.data.read()?;
+    super::check_column_counts(&file, 0, 1)?;
+    Ok(Prepared {
+        burn_in,
+        start,
+        file,
+        context: a.data.data.display().to_string(),
+    })
+}
+
 /// `sysid pmmh`.
 pub fn run_pmmh(a: &PmmhArgs) -> Result<(), CliError> {
     let c = &a.common;
@@ -246,13 +270,13 @@ fn pmmh_with<F: ModelFamily>(
     default_start: Vec<f64>,
 ) -> Result<(), CliError> {
     let c = &a.common;
-    let burn_in = check_common(c)?;
-    let names = family.parameter_names();
-    let prior = priors(c, &names)?;
-    let start = start_of(c, family, default_start)?;
-    let file = c.data.read()?;
-    super::check_column_counts(&file, 0, 1)?;
-    let context = c.data.data.display().to_string();
+    let prior = priors(c, &family.parameter_names())?;
+    let Prepared {
+        burn_in,
+        start,
+        file,
+        context,
+    } = prepare(c, family, default_start)?;
     let series = series_of(&file, &context)?;
     let options = PmmhOptions {
         iterations: c.iterations,
@@ -307,27 +331,8 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
         ("lgss", "conjugate") => {
             let family = LgssFamily::default();
             let prior = priors(c, &family.parameter_names())?;
-            let [phi, q, r] = prior.priors() else {
-                unreachable!("three lgss priors")
-            };
-            let conjugate = LgssConjugate {
-                phi: *phi,
-                q: *q,
-                r: *r,
-            };
-            if !matches!(
-                (phi, q, r),
-                (
-                    ScalarPrior::Normal { .. },
-                    ScalarPrior::InverseGamma { .. },
-                    ScalarPrior::InverseGamma { .. }
-                )
-            ) {
-                return Err(bad(
-                    "--step",
-                    "the conjugate lgss step needs phi ~ normal and q, r ~ inverse_gamma priors (or use --step mh)",
-                ));
-            }
+            let conjugate = LgssConjugate::from_priors(prior.priors())
+                .map_err(|e| bad("--step", format!("{e} (or use --step mh)")))?;
             pgas_with(a, &family, &prior, &conjugate, kernel, vec![0.5, 1.0, 1.0])
         }
         ("lgss", "mh") => {
@@ -391,11 +396,12 @@ where
     S: sysid::pmcmc::ParameterStep<F>,
 {
     let c = &a.common;
-    let burn_in = check_common(c)?;
-    let start = start_of(c, family, default_start)?;
-    let file = c.data.read()?;
-    super::check_column_counts(&file, 0, 1)?;
-    let context = c.data.data.display().to_string();
+    let Prepared {
+        burn_in,
+        start,
+        file,
+        context,
+    } = prepare(c, family, default_start)?;
     let series = series_of(&file, &context)?;
     let options = GibbsOptions {
         iterations: c.iterations,

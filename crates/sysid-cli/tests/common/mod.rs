@@ -47,3 +47,36 @@ pub fn assert_one_line_error(out: &Output, needles: &[&str]) {
         assert!(err.contains(n), "stderr {err:?} should contain {n:?}");
     }
 }
+
+/// The JSON summary a successful command printed on stdout.
+pub fn json_of(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Simulates a canonical system through the CLI into `dir/<system>.csv`.
+pub fn simulate(dir: &Path, system: &str, steps: usize, seed: u64) -> PathBuf {
+    let data = dir.join(format!("{system}.csv"));
+    let steps = steps.to_string();
+    let seed = seed.to_string();
+    let out = sysid(&[
+        "simulate",
+        system,
+        "--steps",
+        &steps,
+        "--seed",
+        &seed,
+        "--out",
+        s(&data),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    data
+}

@@ -1,5 +1,5 @@
-//! Per-particle cost of the bootstrap filter's parts on `nlbench` (M = 10 000), to see
-//! which one bounds the filter. `cargo run --release --example pf_parts`
+//! Per-particle cost of the bootstrap filter's parts on `nlbench` (default M = 10 000), to
+//! see which one bounds the filter. `cargo run --release --example pf_parts [M]`
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 use std::hint::black_box;
@@ -22,8 +22,10 @@ fn ns_per(m: usize, reps: usize, mut f: impl FnMut()) -> f64 {
 }
 
 fn main() {
-    let m = 10_000;
-    let reps = 200;
+    let m: usize = std::env::args()
+        .nth(1)
+        .map_or(10_000, |v| v.parse().expect("M"));
+    let reps = 2_000_000 / m;
     let model = Nlbench::truth();
     let mut rng = stream(1, 1);
     let from: Vec<f64> = (0..m).map(|_| rng.random::<f64>() * 20.0 - 10.0).collect();

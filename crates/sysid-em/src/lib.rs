@@ -3,9 +3,11 @@
 //! * [`runner`]: the one EM loop (stopping rule, trace, monotonicity check, observers)
 //!   that every variant uses;
 //! * [`linear`]: exact EM for linear Gaussian models with a closed-form M-step;
-//! * [`affine`]: particle EM for nonlinear models affine in the parameters.
+//! * [`affine`]: particle EM for nonlinear models affine in the parameters, and PSAEM;
+//! * [`gradient`]: particle EM with a BFGS M-step for any model with log-densities.
 
 pub mod affine;
+pub mod gradient;
 pub mod linear;
 mod regression;
 pub mod runner;

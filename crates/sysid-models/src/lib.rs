@@ -12,11 +12,13 @@
 
 mod affine;
 mod families;
+mod gradient_lgss;
 mod linear_smc;
 mod nlbench;
 
 pub use affine::{LinearAffine, NlbenchAffine};
 pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};
+pub use gradient_lgss::LgssGradient;
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
 pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
 

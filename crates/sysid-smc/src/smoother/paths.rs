@@ -20,6 +20,24 @@ impl Trajectories {
         }
     }
 
+    /// Trajectories from their states, time-major (the `paths` states of step `t`
+    /// contiguous, stride `state_dim`); `None` when the length is not
+    /// `steps * paths * state_dim` or a count is zero.
+    pub fn from_states(
+        steps: usize,
+        paths: usize,
+        state_dim: usize,
+        states: Vec<f64>,
+    ) -> Option<Self> {
+        (steps > 0 && paths > 0 && state_dim > 0 && states.len() == steps * paths * state_dim)
+            .then_some(Trajectories {
+                steps,
+                paths,
+                state_dim,
+                states,
+            })
+    }
+
     /// Number of steps T.
     pub fn steps(&self) -> usize {
         self.steps

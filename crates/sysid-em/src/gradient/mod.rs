@@ -1,0 +1,162 @@
+//! EM with a numerical M-step for models that are not affine in their parameters
+//! (seed 001: Schön, Wills and Ninness; ALGORITHMS.md 4).
+//!
+//! # Model
+//! Any [`GradientModel`]: `x_0 ~ mu_theta`, `x_{t+1} ~ f_theta(. | x_t)`,
+//! `y_t ~ g_theta(. | x_t)`, with the log-densities (and, optionally, their gradients)
+//! in the unconstrained parameters `theta`.
+//!
+//! # Algorithm
+//! Iteration `k` at `theta_k`:
+//! 1. **E-step.** Run the bootstrap filter (M particles, history kept) and draw `K`
+//!    backward trajectories with a smoother of `sysid-smc` (FFBSi or rejection FFBSi).
+//!    They stay fixed for the whole M-step, so `Q^` is a deterministic function.
+//! 2. **M-step.** Maximise `Q^(theta) = I1 + I2 + I3` ([`q_hat`]) by BFGS with the
+//!    More-Thuente line search (argmin), from `theta_k` ([`m_step`]); the value and
+//!    gradient are computed in one pass and cached. `Q^` never decreases within an
+//!    M-step.
+//!
+//! A closed-form sub-step for a linear Gaussian part (as in affine EM) is not used:
+//! the blind Wiener model's linear part and nonlinearity share the state, and one BFGS
+//! over all parameters keeps the code to one path. Iteration `k` draws from the random
+//! streams `(seed, 2k)` (filter) and `(seed, 2k + 1)` (smoother). The trace value is the
+//! filter's log-likelihood estimate at `theta_k`; the E-step is noisy, so the runner
+//! counts decreases instead of stopping on them.
+//!
+//! # Complexity
+//! Per iteration: the filter O(T M), the smoother O(T K M) (FFBSi) or expected O(T K)
+//! (rejection), and O(T K d) per `Q^` evaluation with analytic gradients (O(T K d^2)
+//! with finite differences), times the BFGS evaluations.
+//!
+//! # References
+//! Schön, Wills and Ninness (2011), *System identification of nonlinear state-space
+//! models*, Automatica; Lindsten and Schön (2013); Nocedal and Wright (2006).
+
+mod model;
+mod mstep;
+mod objective;
+
+pub use model::{GradientModel, central_difference};
+pub use mstep::{MStepOptions, MStepOutcome, m_step};
+pub use objective::q_hat;
+
+use crate::EmAlgorithm;
+use rand::RngExt;
+use sysid_smc::{FilterOptions, ParticleFilter, Series, SmcError, Smoother};
+
+/// Errors of gradient EM.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum GradientEmError {
+    /// The particle filter or smoother failed.
+    #[error("{0}")]
+    Smc(#[from] SmcError),
+    /// Parameters the model cannot use.
+    #[error("invalid parameters: {0}")]
+    InvalidParams(String),
+    /// An option is out of range.
+    #[error("invalid option: {0}")]
+    InvalidOption(String),
+    /// `Q^` is not finite at the current parameters (the trajectories are impossible
+    /// under them).
+    #[error("Q^ is not finite at theta = {theta:?}")]
+    NonFiniteQ {
+        /// The parameters.
+        theta: Vec<f64>,
+    },
+}
+
+/// Gradient EM as an [`EmAlgorithm`] for the shared runner; the estimate is the
+/// unconstrained parameter vector.
+pub struct GradientEm<'a, G, S> {
+    model: &'a G,
+    data: Series<'a>,
+    smoother: S,
+    filter: ParticleFilter,
+    options: MStepOptions,
+    seed: u64,
+    iteration: u64,
+    last: Option<MStepOutcome>,
+}
+
+fn sub_seed(seed: u64, k: u64) -> u64 {
+    sysid_smc::stream(seed, k).random()
+}
+
+impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {
+    /// Gradient EM on `data` with a `particles`-particle filter and `smoother` (which
+    /// sets the number of trajectories).
+    pub fn new(
+        model: &'a G,
+        data: Series<'a>,
+        particles: usize,
+        smoother: S,
+        options: MStepOptions,
+        seed: u64,
+    ) -> Result<Self, GradientEmError> {
+        let filter = ParticleFilter::new(FilterOptions {
+            particles,
+            store_history: true,
+            ..FilterOptions::default()
+        })?;
+        Ok(GradientEm {
+            model,
+            data,
+            smoother,
+            filter,
+            options,
+            seed,
+            iteration: 0,
+            last: None,
+        })
+    }
+
+    /// What the last M-step did.
+    pub fn last_m_step(&self) -> Option<&MStepOutcome> {
+        self.last.as_ref()
+    }
+}
+
+impl<G: GradientModel, S: Smoother<G::Smc>> EmAlgorithm for GradientEm<'_, G, S> {
+    type Estimate = Vec<f64>;
+    type Error = GradientEmError;
+
+    fn step(&mut self, current: &Vec<f64>) -> Result<(Vec<f64>, f64), GradientEmError> {
+        if current.len() != self.model.parameter_dim() {
+            return Err(GradientEmError::InvalidParams(format!(
+                "{} parameters given, the model has {}",
+                current.len(),
+                self.model.parameter_dim()
+            )));
+        }
+        let k = self.iteration;
+        self.iteration += 1;
+        let smc = self.model.smc_model(current)?;
+        let run = self
+            .filter
+            .run(&smc, &self.data, sub_seed(self.seed, 2 * k))?;
+        let history = self.filter.history().expect("history is stored");
+        let (paths, _) = self.smoother.trajectories(
+            &smc,
+            history,
+            &self.data,
+            sub_seed(self.seed, 2 * k + 1),
+        )?;
+        let outcome = m_step(self.model, &paths, &self.data, current, &self.options)?;
+        let next = outcome.theta.clone();
+        self.last = Some(outcome);
+        Ok((next, run.loglik))
+    }
+
+    fn loglik(&mut self, estimate: &Vec<f64>) -> Result<f64, GradientEmError> {
+        let smc = self.model.smc_model(estimate)?;
+        Ok(self
+            .filter
+            .run(&smc, &self.data, sub_seed(self.seed, u64::MAX))?
+            .loglik)
+    }
+
+    fn is_exact(&self) -> bool {
+        false
+    }
+}

@@ -1,0 +1,178 @@
+//! The M-step: maximise `Q^(theta)` on fixed trajectories by BFGS.
+
+use std::cell::RefCell;
+
+use argmin::core::{CostFunction, Executor, Gradient, State};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::quasinewton::BFGS;
+use sysid_smc::{Series, Trajectories};
+
+use super::{GradientEmError, GradientModel, q_hat};
+
+/// Settings of the BFGS M-step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MStepOptions {
+    /// BFGS iterations at most. Default 50.
+    pub max_iterations: u64,
+    /// Stop when the gradient norm of `-Q^ / T` falls below this. Default 1e-8.
+    pub tol_grad: f64,
+}
+
+impl Default for MStepOptions {
+    fn default() -> Self {
+        MStepOptions {
+            max_iterations: 50,
+            tol_grad: 1e-8,
+        }
+    }
+}
+
+/// What an M-step did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MStepOutcome {
+    /// The new parameters (the old ones if BFGS found nothing better).
+    pub theta: Vec<f64>,
+    /// `Q^` at the old parameters.
+    pub q_before: f64,
+    /// `Q^` at the new parameters (`>= q_before`).
+    pub q_after: f64,
+    /// Cost-and-gradient evaluations.
+    pub evaluations: usize,
+    /// Why BFGS stopped (argmin's termination status, or its error).
+    pub status: String,
+}
+
+/// One evaluation of the cost: the point, `-Q^ / T` and its gradient.
+struct Evaluation {
+    theta: Vec<f64>,
+    cost: f64,
+    grad: Vec<f64>,
+}
+
+/// `-Q^(theta) / T` and its gradient, computed together and cached for the last
+/// point (argmin asks for the cost and the gradient separately).
+struct NegativeQ<'a, G> {
+    model: &'a G,
+    paths: &'a Trajectories,
+    data: &'a Series<'a>,
+    scale: f64,
+    cache: RefCell<Option<Evaluation>>,
+    evaluations: RefCell<usize>,
+}
+
+impl<G: GradientModel> NegativeQ<'_, G> {
+    fn evaluate(&self, theta: &[f64]) -> Result<(f64, Vec<f64>), argmin::core::Error> {
+        if let Some(e) = self.cache.borrow().as_ref()
+            && e.theta.as_slice() == theta
+        {
+            return Ok((e.cost, e.grad.clone()));
+        }
+        let mut grad = vec![0.0; theta.len()];
+        let q = q_hat(self.model, theta, self.paths, self.data, Some(&mut grad));
+        *self.evaluations.borrow_mut() += 1;
+        if !q.is_finite() || grad.iter().any(|g| !g.is_finite()) {
+            return Err(argmin::core::Error::msg(format!(
+                "Q^ or its gradient is not finite at theta = {theta:?}"
+            )));
+        }
+        let cost = -q * self.scale;
+        grad.iter_mut().for_each(|g| *g *= -self.scale);
+        *self.cache.borrow_mut() = Some(Evaluation {
+            theta: theta.to_vec(),
+            cost,
+            grad: grad.clone(),
+        });
+        Ok((cost, grad))
+    }
+}
+
+impl<G: GradientModel> CostFunction for NegativeQ<'_, G> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, theta: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        Ok(self.evaluate(theta)?.0)
+    }
+}
+
+impl<G: GradientModel> Gradient for NegativeQ<'_, G> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+
+    fn gradient(&self, theta: &Vec<f64>) -> Result<Vec<f64>, argmin::core::Error> {
+        Ok(self.evaluate(theta)?.1)
+    }
+}
+
+/// Maximises `Q^` over `theta` from `start` by BFGS with the More-Thuente line search
+/// (argmin 0.11), on `-Q^ / T` (per-step scale, so that the identity is a sensible
+/// first inverse Hessian).
+///
+/// The result never has a smaller `Q^` than `start`: if BFGS fails (a non-finite
+/// value at a trial point) or ends lower, the best point it visited is kept, or
+/// `start` itself.
+pub fn m_step<G: GradientModel>(
+    model: &G,
+    paths: &Trajectories,
+    data: &Series,
+    start: &[f64],
+    options: &MStepOptions,
+) -> Result<MStepOutcome, GradientEmError> {
+    let d = start.len();
+    let q_before = q_hat(model, start, paths, data, None);
+    if !q_before.is_finite() {
+        return Err(GradientEmError::NonFiniteQ {
+            theta: start.to_vec(),
+        });
+    }
+    let problem = NegativeQ {
+        model,
+        paths,
+        data,
+        scale: 1.0 / data.steps() as f64,
+        cache: RefCell::new(None),
+        evaluations: RefCell::new(0),
+    };
+    let linesearch = MoreThuenteLineSearch::new();
+    let solver = BFGS::new(linesearch)
+        .with_tolerance_grad(options.tol_grad)
+        .map_err(|e| GradientEmError::InvalidOption(e.to_string()))?;
+    let identity: Vec<Vec<f64>> = (0..d)
+        .map(|i| (0..d).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+        .collect();
+    let result = Executor::new(problem, solver)
+        .configure(|state| {
+            state
+                .param(start.to_vec())
+                .inv_hessian(identity)
+                .max_iters(options.max_iterations)
+        })
+        .run();
+    let (candidate, status, evaluations) = match result {
+        Ok(mut r) => {
+            let status = r.state.get_termination_status().to_string();
+            let evaluations = r
+                .problem
+                .problem
+                .as_ref()
+                .map_or(0, |p| *p.evaluations.borrow());
+            (r.state.take_best_param(), status, evaluations)
+        }
+        Err(e) => (None, format!("error: {e}"), 0),
+    };
+    let mut outcome = MStepOutcome {
+        theta: start.to_vec(),
+        q_before,
+        q_after: q_before,
+        evaluations,
+        status,
+    };
+    if let Some(theta) = candidate {
+        let q = q_hat(model, &theta, paths, data, None);
+        if q.is_finite() && q >= q_before {
+            outcome.theta = theta;
+            outcome.q_after = q;
+        }
+    }
+    Ok(outcome)
+}

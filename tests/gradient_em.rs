@@ -1,0 +1,230 @@
+//! Gradient EM (ALGORITHMS.md 4) against exact answers on `lgss`: the gradient of Q^
+//! against central differences, the BFGS M-step against the closed-form maximiser of
+//! Q^ on fixed trajectories, and the EM fixed point against exact (Kalman) EM.
+
+use proptest::prelude::*;
+use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions, m_step, q_hat};
+use sysid::em::linear::{Covariance, LinearEm, LinearEmSpec};
+use sysid::em::{EmAlgorithm, EmOptions, run_em};
+use sysid::models::{LgssGradient, System};
+use sysid::smc::{FfbsiReject, Series, Trajectories};
+
+/// `lgss`'s gradient model with the finite-difference gradients of the trait's defaults.
+struct NumericLgss(LgssGradient);
+
+impl GradientModel for NumericLgss {
+    type Smc = <LgssGradient as GradientModel>::Smc;
+    fn parameter_dim(&self) -> usize {
+        self.0.parameter_dim()
+    }
+    fn state_dim(&self) -> usize {
+        1
+    }
+    fn parameter_names(&self) -> Vec<String> {
+        self.0.parameter_names()
+    }
+    fn constrained(&self, theta: &[f64]) -> Vec<f64> {
+        self.0.constrained(theta)
+    }
+    fn smc_model(&self, theta: &[f64]) -> Result<Self::Smc, sysid::em::gradient::GradientEmError> {
+        self.0.smc_model(theta)
+    }
+    fn log_initial(&self, theta: &[f64], x: &[f64]) -> f64 {
+        self.0.log_initial(theta, x)
+    }
+    fn log_transition(&self, theta: &[f64], t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        self.0.log_transition(theta, t, x, u, next)
+    }
+    fn log_observation(&self, theta: &[f64], t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {
+        self.0.log_observation(theta, t, x, u, y)
+    }
+}
+
+fn random_paths(steps: usize, paths: usize, seed: u64) -> (Trajectories, Vec<f64>) {
+    use rand::RngExt;
+    let mut rng = sysid::smc::stream(seed, 0);
+    let mut states = vec![0.0; steps * paths];
+    let mut y = vec![0.0; steps];
+    for (t, yt) in y.iter_mut().enumerate() {
+        *yt = rng.random::<f64>() * 4.0 - 2.0;
+        for k in 0..paths {
+            states[t * paths + k] = *yt + rng.random::<f64>() - 0.5;
+        }
+    }
+    (
+        Trajectories::from_states(steps, paths, 1, states).unwrap(),
+        y,
+    )
+}
+
+/// Central difference of Q^ itself in coordinate `i`.
+fn fd_of_q<G: GradientModel>(
+    model: &G,
+    theta: &[f64],
+    paths: &Trajectories,
+    data: &Series,
+    i: usize,
+) -> f64 {
+    let h = 1e-5 * theta[i].abs().max(1.0);
+    let (mut up, mut down) = (theta.to_vec(), theta.to_vec());
+    up[i] += h;
+    down[i] -= h;
+    (q_hat(model, &up, paths, data, None) - q_hat(model, &down, paths, data, None)) / (2.0 * h)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn gradient_of_q_matches_central_differences(
+        phi in -0.95f64..0.95, ln_q in -2.0f64..1.0, ln_r in -2.0f64..1.0, seed in 0u64..1000,
+    ) {
+        let (paths, y) = random_paths(40, 5, seed);
+        let data = Series::new(&y, 1).unwrap();
+        let theta = [phi, ln_q, ln_r];
+        let analytic = LgssGradient { p1: 1.0, fixed_r: None };
+        let numeric = NumericLgss(analytic);
+        let mut grad = vec![0.0; 3];
+        let mut grad_default = vec![0.0; 3];
+        let q = q_hat(&analytic, &theta, &paths, &data, Some(&mut grad));
+        let q_default = q_hat(&numeric, &theta, &paths, &data, Some(&mut grad_default));
+        prop_assert!((q - q_default).abs() <= 1e-12 * q.abs());
+        let scale = grad.iter().fold(1.0f64, |m, g| m.max(g.abs()));
+        for i in 0..3 {
+            let fd = fd_of_q(&analytic, &theta, &paths, &data, i);
+            prop_assert!((grad[i] - fd).abs() <= 1e-6 * scale, "analytic {} vs fd {} ({i})", grad[i], fd);
+            prop_assert!((grad_default[i] - fd).abs() <= 1e-6 * scale, "default {} vs fd {} ({i})", grad_default[i], fd);
+        }
+    }
+}
+
+#[test]
+fn bfgs_m_step_reaches_the_closed_form_maximiser_and_never_lowers_q() {
+    let (paths, y) = random_paths(200, 20, 3);
+    let data = Series::new(&y, 1).unwrap();
+    let model = LgssGradient {
+        p1: 1.0,
+        fixed_r: None,
+    };
+    // closed form: phi = sum x x' / sum x^2, q = mean (x' - phi x)^2, r = mean (y - x)^2
+    let (mut sxx, mut sxn, mut count) = (0.0, 0.0, 0.0);
+    let mut sr = 0.0;
+    for k in 0..20 {
+        for (t, &yt) in y.iter().enumerate() {
+            let x = paths.state(t, k)[0];
+            sr += (yt - x).powi(2);
+            if t + 1 < 200 {
+                let next = paths.state(t + 1, k)[0];
+                sxx += x * x;
+                sxn += x * next;
+                count += 1.0;
+            }
+        }
+    }
+    let phi = sxn / sxx;
+    let mut sq = 0.0;
+    for k in 0..20 {
+        for t in 0..199 {
+            sq += (paths.state(t + 1, k)[0] - phi * paths.state(t, k)[0]).powi(2);
+        }
+    }
+    let exact = [phi, sq / count, sr / (20.0 * 200.0)];
+    for start in [[0.0, 0.0, 0.0], [0.9, -1.0, 1.0], [-0.5, 2.0, -2.0]] {
+        let out = m_step(&model, &paths, &data, &start, &MStepOptions::default()).unwrap();
+        let fit = model.constrained(&out.theta);
+        assert!(out.q_after >= out.q_before, "{out:?}");
+        assert!(
+            out.q_after > out.q_before + 1.0,
+            "no progress from {start:?}: {out:?}"
+        );
+        for (f, e) in fit.iter().zip(exact) {
+            assert!(
+                (f - e).abs() < 1e-6 * e.abs().max(1.0),
+                "{fit:?} vs {exact:?} ({})",
+                out.status
+            );
+        }
+    }
+    // at the maximiser itself the step keeps (or very slightly improves) the value
+    let at = [exact[0], exact[1].ln(), exact[2].ln()];
+    let out = m_step(&model, &paths, &data, &at, &MStepOptions::default()).unwrap();
+    assert!(out.q_after >= out.q_before);
+}
+
+#[test]
+fn gradient_em_on_lgss_reaches_the_exact_em_estimate() {
+    let truth = System::Lgss.model();
+    let sim = System::Lgss.simulate(300, 8).unwrap();
+    let y = sim.record.y.as_slice().to_vec();
+    let r = truth.r()[(0, 0)];
+    // exact reference: linear EM with C and R fixed, run to convergence (its fixed point
+    // is the maximum-likelihood estimate of (A, Q))
+    let spec = LinearEmSpec {
+        c: false,
+        r: Covariance::Fixed,
+        h: false,
+        mu: false,
+        p1: false,
+        ..LinearEmSpec::default()
+    };
+    let model = LgssGradient {
+        p1: truth.p1()[(0, 0)],
+        fixed_r: Some(r),
+    };
+    let start = vec![0.5, (0.5f64).ln()];
+    let records = [sim.record.clone()];
+    let mut linear = LinearEm::new(&records, spec);
+    let exact_options = EmOptions {
+        max_iterations: 5000,
+        tol: 1e-13,
+        ..EmOptions::default()
+    }
+    .check()
+    .unwrap();
+    let exact = run_em(
+        &mut linear,
+        model.linear_model(&start).unwrap(),
+        &exact_options,
+        &mut (),
+    )
+    .estimate;
+    let exact = [exact.a()[(0, 0)], exact.q()[(0, 0)]];
+
+    let data = Series::new(&y, 1).unwrap();
+    let smoother = FfbsiReject {
+        paths: 100,
+        max_trials: None,
+        parallel: false,
+    };
+    let mut em = GradientEm::new(&model, data, 500, smoother, MStepOptions::default(), 3).unwrap();
+    let mut current = start;
+    let mut tail: Vec<Vec<f64>> = Vec::new();
+    for k in 0..100 {
+        current = em.step(&current).unwrap().0;
+        let m = em.last_m_step().unwrap();
+        assert!(m.q_after >= m.q_before, "iteration {k}: Q^ decreased");
+        if k >= 50 {
+            tail.push(model.constrained(&current));
+        }
+    }
+    for (i, name) in ["phi", "q"].iter().enumerate() {
+        let values: Vec<f64> = tail.iter().map(|v| v[i]).collect();
+        let mean = values.iter().sum::<f64>() / values.len() as f64;
+        let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
+            / (values.len() - 1) as f64)
+            .sqrt();
+        eprintln!(
+            "{name}: gradient EM {mean:.5} (sd {sd:.5}), exact EM {:.5}",
+            exact[i]
+        );
+        assert!(
+            sd < 0.05 * exact[i].abs(),
+            "{name}: too noisy to test ({sd})"
+        );
+        assert!(
+            (mean - exact[i]).abs() < 4.0 * sd.max(1e-3 * exact[i].abs()),
+            "{name}: {mean} vs {}",
+            exact[i]
+        );
+    }
+}

@@ -9,11 +9,12 @@ use sysid::em::{EmAlgorithm, EmOptions, run_em};
 use sysid::models::{LgssGradient, System};
 use sysid::smc::{FfbsiReject, Series, Trajectories};
 
-/// `lgss`'s gradient model with the finite-difference gradients of the trait's defaults.
+/// `lgss`'s gradient model with finite-difference gradients (the trait's default).
 struct NumericLgss(LgssGradient);
 
 impl GradientModel for NumericLgss {
     type Smc = <LgssGradient as GradientModel>::Smc;
+    type Params = <LgssGradient as GradientModel>::Params;
     fn parameter_dim(&self) -> usize {
         self.0.parameter_dim()
     }
@@ -29,14 +30,24 @@ impl GradientModel for NumericLgss {
     fn smc_model(&self, theta: &[f64]) -> Result<Self::Smc, sysid::em::gradient::GradientEmError> {
         self.0.smc_model(theta)
     }
-    fn log_initial(&self, theta: &[f64], x: &[f64]) -> f64 {
-        self.0.log_initial(theta, x)
+    fn unpack(&self, theta: &[f64]) -> Self::Params {
+        self.0.unpack(theta)
     }
-    fn log_transition(&self, theta: &[f64], t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
-        self.0.log_transition(theta, t, x, u, next)
+    fn log_initial(&self, p: &Self::Params, x: &[f64]) -> f64 {
+        self.0.log_initial(p, x)
     }
-    fn log_observation(&self, theta: &[f64], t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {
-        self.0.log_observation(theta, t, x, u, y)
+    fn log_transition(
+        &self,
+        p: &Self::Params,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &[f64],
+    ) -> f64 {
+        self.0.log_transition(p, t, x, u, next)
+    }
+    fn log_observation(&self, p: &Self::Params, t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {
+        self.0.log_observation(p, t, x, u, y)
     }
 }
 
@@ -226,5 +237,55 @@ fn gradient_em_on_lgss_reaches_the_exact_em_estimate() {
             "{name}: {mean} vs {}",
             exact[i]
         );
+    }
+}
+
+#[test]
+fn wiener_gradient_matches_central_differences() {
+    use sysid::models::{BlindWiener, WienerEstimate, WienerModel};
+    let sim = BlindWiener::simulate(60, 4);
+    let data = Series::new(&sim.outputs, 2).unwrap();
+    let model = WienerModel::default();
+    // trajectories: z near the truth's, second state arbitrary; offsets keep every z
+    // away from the breakpoints (where Q^ has kinks and differences are meaningless)
+    let paths = 3;
+    let mut states = Vec::new();
+    for t in 0..60 {
+        for k in 0..paths {
+            states.push(sim.z[t] + 0.1 * k as f64 + 0.0123);
+            states.push(0.3 * sim.z[t.saturating_sub(1)] - 0.05 * k as f64);
+        }
+    }
+    let paths = Trajectories::from_states(60, paths, 2, states).unwrap();
+    for estimate in [
+        WienerEstimate {
+            a: [[1.0, -0.9], [1.0, 0.0]],
+            q: [[1.0, 0.2], [0.2, 0.5]],
+            beta: [-2.0, 3.0, -1.5, 1.0],
+            r: [0.01, 0.02],
+        },
+        WienerEstimate {
+            a: [[0.5, 0.1], [-0.3, 0.2]],
+            q: [[2.0, -0.5], [-0.5, 1.0]],
+            beta: [-0.2, 0.3, -0.15, 0.1],
+            r: [0.1, 0.1],
+        },
+    ] {
+        let theta = estimate.theta().unwrap();
+        let back = WienerEstimate::from_theta(&theta);
+        assert!(
+            (back.q[1][0] - estimate.q[1][0]).abs() < 1e-12
+                && (back.beta[1] - estimate.beta[1]).abs() < 1e-12
+        );
+        let mut grad = vec![0.0; 13];
+        q_hat(&model, &theta, &paths, &data, Some(&mut grad));
+        let scale = grad.iter().fold(1.0f64, |m, g| m.max(g.abs()));
+        for (i, g) in grad.iter().enumerate() {
+            let fd = fd_of_q(&model, &theta, &paths, &data, i);
+            assert!(
+                (g - fd).abs() <= 1e-6 * scale,
+                "parameter {i}: analytic {g} vs fd {fd}"
+            );
+        }
     }
 }

@@ -1,7 +1,7 @@
 //! `lgss` for gradient EM: `theta = (phi, ln q, ln r)` with analytic gradients.
 
 use nalgebra::dmatrix;
-use sysid_em::gradient::{GradientEmError, GradientModel};
+use sysid_em::gradient::{GradientEmError, GradientModel, Gradients};
 use sysid_kalman::LinearGaussianModel;
 
 use crate::LinearGaussianSmc;
@@ -44,8 +44,31 @@ impl LgssGradient {
     }
 }
 
+/// [`LgssGradient`]'s parameters unpacked: `phi`, `1/q`, `ln q`, `r`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LgssParams {
+    phi: f64,
+    inv_q: f64,
+    ln_q: f64,
+    r: f64,
+}
+
 impl GradientModel for LgssGradient {
     type Smc = LinearGaussianSmc;
+    type Params = LgssParams;
+
+    fn unpack(&self, theta: &[f64]) -> LgssParams {
+        LgssParams {
+            phi: theta[0],
+            inv_q: (-theta[1]).exp(),
+            ln_q: theta[1],
+            r: self.r(theta),
+        }
+    }
+
+    fn gradients(&self) -> Gradients {
+        Gradients::Analytic
+    }
 
     fn parameter_dim(&self) -> usize {
         if self.fixed_r.is_some() { 2 } else { 3 }
@@ -77,44 +100,45 @@ impl GradientModel for LgssGradient {
             .map_err(|e| GradientEmError::InvalidParams(e.to_string()))
     }
 
-    fn log_initial(&self, _theta: &[f64], x: &[f64]) -> f64 {
+    fn log_initial(&self, _p: &LgssParams, x: &[f64]) -> f64 {
         -0.5 * (LN_2PI + self.p1.ln()) - 0.5 * x[0] * x[0] / self.p1
     }
 
-    fn log_transition(&self, theta: &[f64], _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
-        let e = next[0] - theta[0] * x[0];
-        -0.5 * (LN_2PI + theta[1]) - 0.5 * e * e * (-theta[1]).exp()
+    fn log_transition(
+        &self,
+        p: &LgssParams,
+        _t: usize,
+        x: &[f64],
+        _u: &[f64],
+        next: &[f64],
+    ) -> f64 {
+        let e = next[0] - p.phi * x[0];
+        -0.5 * (LN_2PI + p.ln_q) - 0.5 * e * e * p.inv_q
     }
 
-    fn log_observation(&self, theta: &[f64], _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
-        let r = self.r(theta);
+    fn log_observation(&self, p: &LgssParams, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
         let e = y[0] - x[0];
-        -0.5 * (LN_2PI + r.ln()) - 0.5 * e * e / r
-    }
-
-    fn log_initial_gradient(&self, theta: &[f64], x: &[f64], _grad: &mut [f64]) -> f64 {
-        self.log_initial(theta, x)
+        -0.5 * (LN_2PI + p.r.ln()) - 0.5 * e * e / p.r
     }
 
     fn log_transition_gradient(
         &self,
-        theta: &[f64],
+        p: &LgssParams,
         t: usize,
         x: &[f64],
         u: &[f64],
         next: &[f64],
         grad: &mut [f64],
     ) -> f64 {
-        let e = next[0] - theta[0] * x[0];
-        let inv_q = (-theta[1]).exp();
-        grad[0] += e * x[0] * inv_q;
-        grad[1] += -0.5 + 0.5 * e * e * inv_q;
-        self.log_transition(theta, t, x, u, next)
+        let e = next[0] - p.phi * x[0];
+        grad[0] += e * x[0] * p.inv_q;
+        grad[1] += -0.5 + 0.5 * e * e * p.inv_q;
+        self.log_transition(p, t, x, u, next)
     }
 
     fn log_observation_gradient(
         &self,
-        theta: &[f64],
+        p: &LgssParams,
         t: usize,
         x: &[f64],
         u: &[f64],
@@ -123,8 +147,8 @@ impl GradientModel for LgssGradient {
     ) -> f64 {
         if self.fixed_r.is_none() {
             let e = y[0] - x[0];
-            grad[2] += -0.5 + 0.5 * e * e * (-theta[2]).exp();
+            grad[2] += -0.5 + 0.5 * e * e / p.r;
         }
-        self.log_observation(theta, t, x, u, y)
+        self.log_observation(p, t, x, u, y)
     }
 }

@@ -5,6 +5,7 @@
 //! | --- | --- | --- |
 //! | [`lgss`] | scalar `x' = 0.9 x + w`, `y = x + e`, `Var w = 1`, `Var e = 0.5` | the usual particle-filter test model |
 //! | [`lti2x2`] | 2-input 2-output system of McMillan degree 8 | Gibson and Ninness (2005), ALGORITHMS.md 1.5 |
+//! | [`BlindWiener`] | 2-state linear part, saturation and dead zone, unobserved input | seed 001, ALGORITHMS.md 4 |
 //! | [`Nlbench`] | `x' = a x + b x/(1+x^2) + c cos(1.2 t) + w`, `y = d x^2 + e` | Schön, Wills and Ninness (2006), ALGORITHMS.md 3 |
 //!
 //! [`LinearGaussianSmc`] lets any linear Gaussian model run through the particle
@@ -15,12 +16,17 @@ mod families;
 mod gradient_lgss;
 mod linear_smc;
 mod nlbench;
+mod wiener;
 
 pub use affine::{LinearAffine, NlbenchAffine};
 pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};
 pub use gradient_lgss::LgssGradient;
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
 pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
+pub use wiener::{
+    BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone, saturation,
+    spectral_magnitude, wiener_start,
+};
 
 use nalgebra::{DMatrix, dmatrix};
 use rand::SeedableRng;

@@ -36,7 +36,7 @@ mod model;
 mod mstep;
 mod objective;
 
-pub use model::{GradientModel, central_difference};
+pub use model::{GradientModel, Gradients, central_difference};
 pub use mstep::{MStepOptions, MStepOutcome, m_step};
 pub use objective::q_hat;
 

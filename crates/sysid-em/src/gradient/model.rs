@@ -1,23 +1,35 @@
-//! What a model provides to gradient EM: the three log-densities in `theta` and their
-//! gradients.
+//! What a model provides to gradient EM: the three log-densities at given parameters
+//! and, optionally, their gradients.
 
 use super::GradientEmError;
 use sysid_smc::{FilterModel, TransitionDensity};
+
+/// How the gradient of `Q^` is obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Gradients {
+    /// The model's `*_gradient` methods (exact and cheap).
+    Analytic,
+    /// Central differences of `Q^` as a whole, `2 d` extra evaluations of `Q^` (step
+    /// `1e-5 max(1, |theta_i|)`).
+    FiniteDifferences,
+}
 
 /// A state-space model for EM with a numerical M-step (ALGORITHMS.md 4).
 ///
 /// `theta` is the model's **unconstrained** parameter vector (log-variances, Cholesky
 /// factors with log diagonals, ordered breakpoints as a first value and log gaps, ...);
-/// the model maps it to its natural parameters ([`constrained`](Self::constrained)).
-/// BFGS then needs no bounds.
+/// [`unpack`](Self::unpack) turns it into whatever the densities need (once per
+/// evaluation of `Q^`, not once per term), and [`constrained`](Self::constrained)
+/// into the natural parameters. BFGS then needs no bounds.
 ///
 /// The gradient methods add `d/dtheta` of the log-density into `grad` and return the
-/// value. Their defaults are central finite differences of the value methods (step
-/// `1e-5 max(1, |theta_i|)`); models override them with analytic gradients, which are
-/// faster and exact.
+/// value; they are called only when [`gradients`](Self::gradients) says
+/// [`Gradients::Analytic`]. Their defaults add nothing.
 pub trait GradientModel: Sync {
     /// The particle model at `theta`, for the E-step.
     type Smc: FilterModel + TransitionDensity + Sync;
+    /// The parameters unpacked for the densities.
+    type Params;
 
     /// Number of parameters.
     fn parameter_dim(&self) -> usize;
@@ -29,47 +41,58 @@ pub trait GradientModel: Sync {
     fn constrained(&self, theta: &[f64]) -> Vec<f64>;
     /// The particle model at `theta`; errors on values it cannot use.
     fn smc_model(&self, theta: &[f64]) -> Result<Self::Smc, GradientEmError>;
+    /// `theta` unpacked for the densities.
+    fn unpack(&self, theta: &[f64]) -> Self::Params;
+    /// Whether the `*_gradient` methods are implemented. Default: finite differences.
+    fn gradients(&self) -> Gradients {
+        Gradients::FiniteDifferences
+    }
 
     /// `log mu_theta(x_0)`.
-    fn log_initial(&self, theta: &[f64], x: &[f64]) -> f64;
+    fn log_initial(&self, p: &Self::Params, x: &[f64]) -> f64;
     /// `log f_theta(next | x, u_t, t)`.
-    fn log_transition(&self, theta: &[f64], t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64;
+    fn log_transition(&self, p: &Self::Params, t: usize, x: &[f64], u: &[f64], next: &[f64])
+    -> f64;
     /// `log g_theta(y | x, u_t, t)` (`y` may hold NaN entries: missing).
-    fn log_observation(&self, theta: &[f64], t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64;
+    fn log_observation(&self, p: &Self::Params, t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64;
 
     /// `log mu_theta(x_0)`, adding its gradient into `grad`.
-    fn log_initial_gradient(&self, theta: &[f64], x: &[f64], grad: &mut [f64]) -> f64 {
-        central_difference(theta, grad, |th| self.log_initial(th, x))
+    fn log_initial_gradient(&self, p: &Self::Params, x: &[f64], grad: &mut [f64]) -> f64 {
+        let _ = grad;
+        self.log_initial(p, x)
     }
 
     /// `log f_theta(next | x)`, adding its gradient into `grad`.
     fn log_transition_gradient(
         &self,
-        theta: &[f64],
+        p: &Self::Params,
         t: usize,
         x: &[f64],
         u: &[f64],
         next: &[f64],
         grad: &mut [f64],
     ) -> f64 {
-        central_difference(theta, grad, |th| self.log_transition(th, t, x, u, next))
+        let _ = grad;
+        self.log_transition(p, t, x, u, next)
     }
 
     /// `log g_theta(y | x)`, adding its gradient into `grad`.
     fn log_observation_gradient(
         &self,
-        theta: &[f64],
+        p: &Self::Params,
         t: usize,
         x: &[f64],
         u: &[f64],
         y: &[f64],
         grad: &mut [f64],
     ) -> f64 {
-        central_difference(theta, grad, |th| self.log_observation(th, t, x, u, y))
+        let _ = grad;
+        self.log_observation(p, t, x, u, y)
     }
 }
 
-/// `f(theta)`, adding the central-difference gradient of `f` into `grad`.
+/// `f(theta)`, writing the central-difference gradient of `f` into `grad` (step
+/// `1e-5 max(1, |theta_i|)`).
 pub fn central_difference(theta: &[f64], grad: &mut [f64], f: impl Fn(&[f64]) -> f64) -> f64 {
     let mut shifted = theta.to_vec();
     for (i, g) in grad.iter_mut().enumerate() {
@@ -79,7 +102,7 @@ pub fn central_difference(theta: &[f64], grad: &mut [f64], f: impl Fn(&[f64]) ->
         shifted[i] = theta[i] - h;
         let down = f(&shifted);
         shifted[i] = theta[i];
-        *g += (up - down) / (2.0 * h);
+        *g = (up - down) / (2.0 * h);
     }
     f(theta)
 }

@@ -67,6 +67,11 @@ impl<G: GradientModel> NegativeQ<'_, G> {
         {
             return Ok((e.cost, e.grad.clone()));
         }
+        if theta.iter().any(|v| !v.is_finite()) {
+            return Err(argmin::core::Error::msg(format!(
+                "the line search reached non-finite parameters {theta:?}"
+            )));
+        }
         let mut grad = vec![0.0; theta.len()];
         let q = q_hat(self.model, theta, self.paths, self.data, Some(&mut grad));
         *self.evaluations.borrow_mut() += 1;

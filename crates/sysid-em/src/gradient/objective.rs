@@ -1,7 +1,7 @@
 //! The intermediate quantity `Q^(theta)` on fixed smoothed trajectories, with its
 //! gradient.
 
-use super::GradientModel;
+use super::{GradientModel, Gradients, central_difference};
 use sysid_smc::{Series, Trajectories};
 
 /// `Q^(theta) = I1 + I2 + I3` of ALGORITHMS.md 4 for the `K` paths of `paths`:
@@ -10,8 +10,9 @@ use sysid_smc::{Series, Trajectories};
 /// I2 = (1/K) sum_k sum_{t<T-1} log f(x_{t+1}^k | x_t^k)
 /// I3 = (1/K) sum_k sum_t log g(y_t | x_t^k)        (steps with y_t all missing skipped)
 /// ```
-/// With `grad`, its gradient is written there (overwritten). Summation runs in a fixed
-/// order, so the value is reproducible.
+/// With `grad`, its gradient is written there: from the model's analytic gradients, or
+/// by central differences of `Q^`. Summation runs in a fixed order, so the value is
+/// reproducible.
 pub fn q_hat<G: GradientModel>(
     model: &G,
     theta: &[f64],
@@ -19,48 +20,57 @@ pub fn q_hat<G: GradientModel>(
     data: &Series,
     grad: Option<&mut [f64]>,
 ) -> f64 {
-    let k = paths.paths();
-    let steps = paths.steps();
+    match (grad, model.gradients()) {
+        (None, _) => sum_terms(model, theta, paths, data, None),
+        (Some(grad), Gradients::Analytic) => sum_terms(model, theta, paths, data, Some(grad)),
+        (Some(grad), Gradients::FiniteDifferences) => {
+            central_difference(theta, grad, |th| sum_terms(model, th, paths, data, None))
+        }
+    }
+}
+
+fn sum_terms<G: GradientModel>(
+    model: &G,
+    theta: &[f64],
+    paths: &Trajectories,
+    data: &Series,
+    mut grad: Option<&mut [f64]>,
+) -> f64 {
+    let p = model.unpack(theta);
+    let (k, steps) = (paths.paths(), paths.steps());
+    if let Some(g) = grad.as_deref_mut() {
+        g.fill(0.0);
+    }
     let mut total = 0.0;
-    match grad {
-        None => {
-            for j in 0..k {
-                total += model.log_initial(theta, paths.state(0, j));
+    for j in 0..k {
+        let x = paths.state(0, j);
+        total += match grad.as_deref_mut() {
+            Some(g) => model.log_initial_gradient(&p, x, g),
+            None => model.log_initial(&p, x),
+        };
+    }
+    for t in 0..steps {
+        let (u, observed) = (data.input(t), !data.is_missing(t));
+        let y = data.output(t);
+        for j in 0..k {
+            let x = paths.state(t, j);
+            if t + 1 < steps {
+                let next = paths.state(t + 1, j);
+                total += match grad.as_deref_mut() {
+                    Some(g) => model.log_transition_gradient(&p, t, x, u, next, g),
+                    None => model.log_transition(&p, t, x, u, next),
+                };
             }
-            for t in 0..steps {
-                let (u, observed) = (data.input(t), !data.is_missing(t));
-                for j in 0..k {
-                    let x = paths.state(t, j);
-                    if t + 1 < steps {
-                        total += model.log_transition(theta, t, x, u, paths.state(t + 1, j));
-                    }
-                    if observed {
-                        total += model.log_observation(theta, t, x, u, data.output(t));
-                    }
-                }
+            if observed {
+                total += match grad.as_deref_mut() {
+                    Some(g) => model.log_observation_gradient(&p, t, x, u, y, g),
+                    None => model.log_observation(&p, t, x, u, y),
+                };
             }
         }
-        Some(grad) => {
-            grad.fill(0.0);
-            for j in 0..k {
-                total += model.log_initial_gradient(theta, paths.state(0, j), grad);
-            }
-            for t in 0..steps {
-                let (u, observed) = (data.input(t), !data.is_missing(t));
-                for j in 0..k {
-                    let x = paths.state(t, j);
-                    if t + 1 < steps {
-                        let next = paths.state(t + 1, j);
-                        total += model.log_transition_gradient(theta, t, x, u, next, grad);
-                    }
-                    if observed {
-                        total +=
-                            model.log_observation_gradient(theta, t, x, u, data.output(t), grad);
-                    }
-                }
-            }
-            grad.iter_mut().for_each(|g| *g /= k as f64);
-        }
+    }
+    if let Some(g) = grad {
+        g.iter_mut().for_each(|v| *v /= k as f64);
     }
     total / k as f64
 }

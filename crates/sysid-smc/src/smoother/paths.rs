@@ -54,6 +54,7 @@ impl Trajectories {
     }
 
     /// The `K` states at step `t`, path-major.
+    #[inline]
     pub fn states(&self, t: usize) -> &[f64] {
         let len = self.paths * self.state_dim;
         &self.states[t * len..(t + 1) * len]
@@ -65,6 +66,7 @@ impl Trajectories {
     }
 
     /// The state of path `k` at step `t`.
+    #[inline]
     pub fn state(&self, t: usize, k: usize) -> &[f64] {
         let n = self.state_dim;
         &self.states(t)[k * n..(k + 1) * n]

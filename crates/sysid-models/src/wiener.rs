@@ -1,0 +1,524 @@
+//! The blind Wiener system of seed 001 (ALGORITHMS.md 4) and its estimation model for
+//! gradient EM.
+
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use sysid_em::gradient::{GradientEmError, GradientModel, Gradients};
+use sysid_smc::{
+    InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
+    TransitionSampler, stream,
+};
+
+const LN_2PI: f64 = 1.837_877_066_409_345_5;
+
+/// `h1`: saturation at `lo` and `hi` (`lo <= hi`; NaN propagates, never a panic).
+#[inline]
+pub fn saturation(z: f64, lo: f64, hi: f64) -> f64 {
+    if z < lo {
+        lo
+    } else if z > hi {
+        hi
+    } else {
+        z
+    }
+}
+
+/// `h2`: dead zone between `lo` and `hi` (slope 1 outside).
+#[inline]
+pub fn dead_zone(z: f64, lo: f64, hi: f64) -> f64 {
+    if z < lo {
+        z - lo
+    } else if z > hi {
+        z - hi
+    } else {
+        0.0
+    }
+}
+
+/// The true blind Wiener system.
+///
+/// # Model
+/// ```text
+/// x_{t+1} = [[1, -0.9], [1, 0]] x_t + [1; 0] u_t,   u_t ~ N(0, 1), not observed
+/// z_t     = [1, 0.3] x_t
+/// y_t     = [h1(z_t); h2(z_t)] + e_t,                e_t ~ N(0, diag(r1, r2))
+/// ```
+/// `h1` saturates at `beta1 = -2` and `beta2 = 3`; `h2` is a dead zone between
+/// `beta3 = -1.5` and `beta4 = 1`; `r1 = r2 = 0.01`; `x_0 = 0`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlindWiener;
+
+/// A simulated record of [`BlindWiener`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct WienerSimulation {
+    /// Outputs `y_t`, time-major (`T x 2`).
+    pub outputs: Vec<f64>,
+    /// The linear part's output `z_t`.
+    pub z: Vec<f64>,
+}
+
+impl BlindWiener {
+    /// `A`.
+    pub const A: [[f64; 2]; 2] = [[1.0, -0.9], [1.0, 0.0]];
+    /// `C`.
+    pub const C: [f64; 2] = [1.0, 0.3];
+    /// The breakpoints `beta1..beta4`.
+    pub const BETA: [f64; 4] = [-2.0, 3.0, -1.5, 1.0];
+    /// The measurement-noise variances.
+    pub const R: [f64; 2] = [0.01, 0.01];
+
+    /// Simulates `steps` samples from the random stream `(seed, 0)`: per step the
+    /// input, then the two measurement noises.
+    pub fn simulate(steps: usize, seed: u64) -> WienerSimulation {
+        let mut rng = stream(seed, 0);
+        let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+        let (a, c, b) = (Self::A, Self::C, Self::BETA);
+        let mut x = [0.0, 0.0];
+        let mut outputs = Vec::with_capacity(2 * steps);
+        let mut z = Vec::with_capacity(steps);
+        for _ in 0..steps {
+            let u = normal();
+            let zt = c[0] * x[0] + c[1] * x[1];
+            z.push(zt);
+            outputs.push(saturation(zt, b[0], b[1]) + Self::R[0].sqrt() * normal());
+            outputs.push(dead_zone(zt, b[2], b[3]) + Self::R[1].sqrt() * normal());
+            x = [
+                a[0][0] * x[0] + a[0][1] * x[1] + u,
+                a[1][0] * x[0] + a[1][1] * x[1],
+            ];
+        }
+        WienerSimulation { outputs, z }
+    }
+
+    /// `|G(e^{i omega})|` of the linear part from `u` to `z`.
+    pub fn magnitude(omega: f64) -> f64 {
+        let q = [[1.0, 0.0], [0.0, 0.0]];
+        spectral_magnitude(&Self::A, &q, &Self::C, omega)
+    }
+}
+
+/// `sqrt(C (e^{iw} I - A)^{-1} Q (e^{iw} I - A)^{-H} C')` for a 2-state system: the
+/// magnitude of the linear part seen through its process noise (the input's gain for
+/// `Q = B B'`).
+pub fn spectral_magnitude(a: &[[f64; 2]; 2], q: &[[f64; 2]; 2], c: &[f64; 2], omega: f64) -> f64 {
+    // M = e^{iw} I - A = [[m00, m01], [m10, m11]] (complex); v = C M^{-1}
+    let (cw, sw) = (omega.cos(), omega.sin());
+    let m = [
+        [(cw - a[0][0], sw), (-a[0][1], 0.0)],
+        [(-a[1][0], 0.0), (cw - a[1][1], sw)],
+    ];
+    let mul = |x: (f64, f64), y: (f64, f64)| (x.0 * y.0 - x.1 * y.1, x.0 * y.1 + x.1 * y.0);
+    let sub = |x: (f64, f64), y: (f64, f64)| (x.0 - y.0, x.1 - y.1);
+    let det = sub(mul(m[0][0], m[1][1]), mul(m[0][1], m[1][0]));
+    let norm = det.0 * det.0 + det.1 * det.1;
+    let inv_det = (det.0 / norm, -det.1 / norm);
+    // M^{-1} = adj(M) / det; v_j = sum_i c_i (M^{-1})_{ij}
+    let adj = [
+        [m[1][1], (-m[0][1].0, -m[0][1].1)],
+        [(-m[1][0].0, -m[1][0].1), m[0][0]],
+    ];
+    let v: Vec<(f64, f64)> = (0..2)
+        .map(|j| {
+            let s = (
+                c[0] * adj[0][j].0 + c[1] * adj[1][j].0,
+                c[0] * adj[0][j].1 + c[1] * adj[1][j].1,
+            );
+            mul(s, inv_det)
+        })
+        .collect();
+    // v Q v^H (real, >= 0)
+    let mut total = 0.0;
+    for i in 0..2 {
+        for j in 0..2 {
+            // Re(v_i q_ij conj(v_j))
+            total += q[i][j] * (v[i].0 * v[j].0 + v[i].1 * v[j].1);
+        }
+    }
+    total.max(0.0).sqrt()
+}
+
+/// The estimation model of blind Wiener identification, for gradient EM.
+///
+/// # Model
+/// ```text
+/// x_{t+1} = A x_t + v_t,   v_t ~ N(0, Q)   (A, Q full: the unobserved input is noise)
+/// z_t     = x_{t,1}                        (C = [1, 0], a choice of state basis)
+/// y_t     = [h1(z_t; beta1, beta2); h2(z_t; beta3, beta4)] + e_t,  e_t ~ N(0, diag(r1, r2))
+/// x_0 ~ N(0, p1 I)
+/// ```
+/// Unconstrained parameters (13): `A` row-major (4); `ln L11, L21, ln L22` of the
+/// Cholesky factor `L` of `Q` (3); `beta1, ln(beta2 - beta1), beta3, ln(beta4 - beta3)`
+/// (4, so the breakpoints stay ordered); `ln r1, ln r2` (2). Gradients are analytic.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WienerModel {
+    /// Variance of each component of `x_0`.
+    pub p1: f64,
+}
+
+impl Default for WienerModel {
+    fn default() -> Self {
+        WienerModel { p1: 10.0 }
+    }
+}
+
+/// The natural parameters of [`WienerModel`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WienerEstimate {
+    /// `A`.
+    pub a: [[f64; 2]; 2],
+    /// `Q`.
+    pub q: [[f64; 2]; 2],
+    /// `beta1..beta4`.
+    pub beta: [f64; 4],
+    /// `r1, r2`.
+    pub r: [f64; 2],
+}
+
+impl WienerEstimate {
+    /// The unconstrained parameter vector, or why the values cannot be represented
+    /// (a `Q` that is not positive definite, unordered breakpoints, a variance <= 0).
+    pub fn theta(&self) -> Result<Vec<f64>, String> {
+        let q = self.q;
+        let l11 = q[0][0].sqrt();
+        if l11.is_nan() || l11 <= 0.0 {
+            return Err(format!("Q11 = {} is not positive", q[0][0]));
+        }
+        let l21 = q[1][0] / l11;
+        let l22_sq = q[1][1] - l21 * l21;
+        if l22_sq.is_nan() || l22_sq <= 0.0 {
+            return Err("Q is not positive definite".into());
+        }
+        let [b1, b2, b3, b4] = self.beta;
+        if !(b2 > b1 && b4 > b3) {
+            return Err(format!("breakpoints {:?} are not ordered", self.beta));
+        }
+        if !(self.r[0] > 0.0 && self.r[1] > 0.0) {
+            return Err(format!("variances {:?} must be positive", self.r));
+        }
+        Ok(vec![
+            self.a[0][0],
+            self.a[0][1],
+            self.a[1][0],
+            self.a[1][1],
+            l11.ln(),
+            l21,
+            0.5 * l22_sq.ln(),
+            b1,
+            (b2 - b1).ln(),
+            b3,
+            (b4 - b3).ln(),
+            self.r[0].ln(),
+            self.r[1].ln(),
+        ])
+    }
+
+    /// The values of an unconstrained vector.
+    pub fn from_theta(theta: &[f64]) -> Self {
+        let p = Unpacked::new(theta);
+        WienerEstimate {
+            a: p.a,
+            q: [
+                [p.l11 * p.l11, p.l11 * p.l21],
+                [p.l11 * p.l21, p.l21 * p.l21 + p.l22 * p.l22],
+            ],
+            beta: p.beta,
+            r: p.r,
+        }
+    }
+
+    /// `sqrt(C (e^{iw} - A)^{-1} Q (.)^H C')` with `C = [1, 0]`.
+    pub fn magnitude(&self, omega: f64) -> f64 {
+        spectral_magnitude(&self.a, &self.q, &[1.0, 0.0], omega)
+    }
+}
+
+/// [`WienerModel`]'s parameters unpacked once per evaluation of `Q^`.
+#[derive(Debug, Clone, Copy)]
+pub struct Unpacked {
+    a: [[f64; 2]; 2],
+    l11: f64,
+    l21: f64,
+    l22: f64,
+    gap_sat: f64,
+    gap_dead: f64,
+    beta: [f64; 4],
+    r: [f64; 2],
+    /// `-ln(2 pi) - ln L11 - ln L22`
+    transition_norm: f64,
+    /// `-0.5 ln(2 pi r_i)`
+    observation_norm: [f64; 2],
+}
+
+impl Unpacked {
+    fn new(theta: &[f64]) -> Self {
+        let (gap_sat, gap_dead) = (theta[8].exp(), theta[10].exp());
+        Unpacked {
+            a: [[theta[0], theta[1]], [theta[2], theta[3]]],
+            l11: theta[4].exp(),
+            l21: theta[5],
+            l22: theta[6].exp(),
+            gap_sat,
+            gap_dead,
+            beta: [theta[7], theta[7] + gap_sat, theta[9], theta[9] + gap_dead],
+            r: [theta[11].exp(), theta[12].exp()],
+            transition_norm: -LN_2PI - theta[4] - theta[6],
+            observation_norm: [-0.5 * (LN_2PI + theta[11]), -0.5 * (LN_2PI + theta[12])],
+        }
+    }
+
+    /// `w = L^{-1} (next - A x)` and `log N(next; A x, Q)`.
+    #[inline]
+    fn transition(&self, x: &[f64], next: &[f64]) -> ([f64; 2], f64) {
+        let a = &self.a;
+        let e0 = next[0] - (a[0][0] * x[0] + a[0][1] * x[1]);
+        let e1 = next[1] - (a[1][0] * x[0] + a[1][1] * x[1]);
+        let w0 = e0 / self.l11;
+        let w1 = (e1 - self.l21 * w0) / self.l22;
+        let value = self.transition_norm - 0.5 * (w0 * w0 + w1 * w1);
+        ([w0, w1], value)
+    }
+
+    #[inline]
+    fn outputs(&self, z: f64) -> [f64; 2] {
+        let b = self.beta;
+        [saturation(z, b[0], b[1]), dead_zone(z, b[2], b[3])]
+    }
+
+    #[inline]
+    fn observation(&self, z: f64, y: &[f64]) -> f64 {
+        let h = self.outputs(z);
+        let mut total = 0.0;
+        for i in 0..2 {
+            if !y[i].is_nan() {
+                let e = y[i] - h[i];
+                total += self.observation_norm[i] - 0.5 * e * e / self.r[i];
+            }
+        }
+        total
+    }
+}
+
+impl GradientModel for WienerModel {
+    type Smc = WienerSmc;
+    type Params = Unpacked;
+
+    fn unpack(&self, theta: &[f64]) -> Unpacked {
+        Unpacked::new(theta)
+    }
+
+    fn gradients(&self) -> Gradients {
+        Gradients::Analytic
+    }
+
+    fn parameter_dim(&self) -> usize {
+        13
+    }
+
+    fn state_dim(&self) -> usize {
+        2
+    }
+
+    fn parameter_names(&self) -> Vec<String> {
+        [
+            "a11", "a12", "a21", "a22", "q11", "q21", "q22", "beta1", "beta2", "beta3", "beta4",
+            "r1", "r2",
+        ]
+        .map(String::from)
+        .to_vec()
+    }
+
+    fn constrained(&self, theta: &[f64]) -> Vec<f64> {
+        let e = WienerEstimate::from_theta(theta);
+        let mut out = vec![e.a[0][0], e.a[0][1], e.a[1][0], e.a[1][1]];
+        out.extend([e.q[0][0], e.q[1][0], e.q[1][1]]);
+        out.extend(e.beta);
+        out.extend(e.r);
+        out
+    }
+
+    fn smc_model(&self, theta: &[f64]) -> Result<WienerSmc, GradientEmError> {
+        if theta.len() != 13 || theta.iter().any(|v| !v.is_finite()) {
+            return Err(GradientEmError::InvalidParams(format!(
+                "the Wiener model needs 13 finite parameters, got {theta:?}"
+            )));
+        }
+        Ok(WienerSmc {
+            p: Unpacked::new(theta),
+            sd_p1: self.p1.sqrt(),
+        })
+    }
+
+    fn log_initial(&self, _p: &Unpacked, x: &[f64]) -> f64 {
+        -LN_2PI - self.p1.ln() - 0.5 * (x[0] * x[0] + x[1] * x[1]) / self.p1
+    }
+
+    fn log_transition(&self, p: &Unpacked, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+        p.transition(x, next).1
+    }
+
+    fn log_observation(&self, p: &Unpacked, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+        p.observation(x[0], y)
+    }
+
+    #[inline]
+    fn log_transition_gradient(
+        &self,
+        p: &Unpacked,
+        _t: usize,
+        x: &[f64],
+        _u: &[f64],
+        next: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
+        let ([w0, w1], value) = p.transition(x, next);
+        // Q^{-1} e = L^{-T} w
+        let v1 = w1 / p.l22;
+        let v0 = (w0 - p.l21 * v1) / p.l11;
+        grad[0] += v0 * x[0];
+        grad[1] += v0 * x[1];
+        grad[2] += v1 * x[0];
+        grad[3] += v1 * x[1];
+        grad[4] += -1.0 + w0 * w0 - w0 * w1 * p.l21 / p.l22;
+        grad[5] += w0 * w1 / p.l22;
+        grad[6] += -1.0 + w1 * w1;
+        value
+    }
+
+    #[inline]
+    fn log_observation_gradient(
+        &self,
+        p: &Unpacked,
+        _t: usize,
+        x: &[f64],
+        _u: &[f64],
+        y: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
+        let z = x[0];
+        let h = p.outputs(z);
+        let b = p.beta;
+        if !y[0].is_nan() {
+            let e = y[0] - h[0];
+            let dh = e / p.r[0]; // d log g / d h1
+            // h1 = beta1 below, beta2 = beta1 + gap above
+            if z < b[0] {
+                grad[7] += dh;
+            } else if z > b[1] {
+                grad[7] += dh;
+                grad[8] += dh * p.gap_sat;
+            }
+            grad[11] += -0.5 + 0.5 * e * e / p.r[0];
+        }
+        if !y[1].is_nan() {
+            let e = y[1] - h[1];
+            let dh = e / p.r[1];
+            // h2 = z - beta3 below, z - beta4 = z - beta3 - gap above
+            if z < b[2] {
+                grad[9] -= dh;
+            } else if z > b[3] {
+                grad[9] -= dh;
+                grad[10] -= dh * p.gap_dead;
+            }
+            grad[12] += -0.5 + 0.5 * e * e / p.r[1];
+        }
+        p.observation(z, y)
+    }
+}
+
+/// [`WienerModel`] at fixed parameters, as a particle model.
+#[derive(Debug, Clone, Copy)]
+pub struct WienerSmc {
+    p: Unpacked,
+    sd_p1: f64,
+}
+
+impl StateSpace for WienerSmc {
+    fn state_dim(&self) -> usize {
+        2
+    }
+}
+
+impl InitialSampler for WienerSmc {
+    fn sample_initial<R: Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+        for v in x.iter_mut() {
+            let e: f64 = StandardNormal.sample(rng);
+            *v = self.sd_p1 * e;
+        }
+    }
+}
+
+impl TransitionSampler for WienerSmc {
+    fn sample_transition<R: Rng + ?Sized>(
+        &self,
+        _t: usize,
+        x: &[f64],
+        _u: &[f64],
+        next: &mut [f64],
+        rng: &mut R,
+    ) {
+        let (e0, e1): (f64, f64) = (StandardNormal.sample(rng), StandardNormal.sample(rng));
+        let a = &self.p.a;
+        next[0] = a[0][0] * x[0] + a[0][1] * x[1] + self.p.l11 * e0;
+        next[1] = a[1][0] * x[0] + a[1][1] * x[1] + self.p.l21 * e0 + self.p.l22 * e1;
+    }
+}
+
+impl ObservationDensity for WienerSmc {
+    fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+        self.p.observation(x[0], y)
+    }
+}
+
+impl TransitionDensity for WienerSmc {
+    fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+        self.p.transition(x, next).1
+    }
+}
+
+impl TransitionBound for WienerSmc {
+    fn log_transition_bound(&self, _t: usize, _u: &[f64]) -> f64 {
+        self.p.transition_norm
+    }
+}
+
+/// The lecture's starting point from outputs `y` (time-major `T x 2`): the linear part
+/// from N4SID (order 2, no inputs) on `y1` alone, put in the basis where `C = [1, 0]`;
+/// `r1 = r2 = 0.1`; each breakpoint at a tenth of its true value.
+///
+/// N4SID's `Q` is made positive definite if needed by adding `1e-6 trace(Q) I`.
+pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
+    use nalgebra::DMatrix;
+    use sysid_subspace::{N4sidOptions, Order, n4sid};
+    let steps = outputs.len() / 2;
+    let y1 = DMatrix::from_iterator(1, steps, outputs.iter().step_by(2).copied());
+    let record = sysid_kalman::Record::new(DMatrix::zeros(0, steps), y1);
+    let fit = n4sid(
+        &record,
+        &N4sidOptions {
+            order: Order::Fixed(2),
+            block_rows: None,
+        },
+    )
+    .map_err(|e| format!("N4SID on y1: {e}"))?;
+    let (a, c, q) = (fit.model.a(), fit.model.c(), fit.model.q());
+    let t = if c[(0, 0)].abs() >= 1e-3 * c[(0, 1)].abs() {
+        DMatrix::from_row_slice(2, 2, &[c[(0, 0)], c[(0, 1)], 0.0, 1.0])
+    } else {
+        DMatrix::from_row_slice(2, 2, &[c[(0, 0)], c[(0, 1)], 1.0, 0.0])
+    };
+    let t_inv = t.clone().try_inverse().ok_or("N4SID gave C = 0 on y1")?;
+    let a2 = &t * a * &t_inv;
+    let mut q2 = &t * q * t.transpose();
+    q2 = (&q2 + q2.transpose()) * 0.5;
+    if q2.clone().cholesky().is_none() {
+        let jitter = 1e-6 * q2.trace().abs().max(1e-12);
+        q2 += DMatrix::identity(2, 2) * jitter;
+    }
+    let b = BlindWiener::BETA;
+    Ok(WienerEstimate {
+        a: [[a2[(0, 0)], a2[(0, 1)]], [a2[(1, 0)], a2[(1, 1)]]],
+        q: [[q2[(0, 0)], q2[(0, 1)]], [q2[(1, 0)], q2[(1, 1)]]],
+        beta: [b[0] / 10.0, b[1] / 10.0, b[2] / 10.0, b[3] / 10.0],
+        r: [0.1, 0.1],
+    })
+}

@@ -3,7 +3,9 @@
 //! Usage: `cargo run --release --example wiener_em [seed] [iterations] [bfgs iterations]`.
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
 use sysid::em::{EmOptions, run_em};
-use sysid::models::{BlindWiener, WienerEstimate, WienerModel, wiener_start};
+use sysid::models::{
+    BlindWiener, WienerEstimate, WienerModel, normalised_magnitude_error, wiener_start,
+};
 use sysid::smc::{FfbsiReject, Series};
 
 fn main() {
@@ -53,19 +55,11 @@ fn main() {
         BlindWiener::BETA,
         estimate.r
     );
-    let grid: Vec<f64> = (1..=64)
-        .map(|k| std::f64::consts::PI * k as f64 / 64.0)
-        .collect();
-    let truth: Vec<f64> = grid.iter().map(|&w| BlindWiener::magnitude(w)).collect();
-    let est: Vec<f64> = grid.iter().map(|&w| estimate.magnitude(w)).collect();
-    let norm = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
-    let (nt, ne) = (norm(&truth), norm(&est));
-    let err: Vec<f64> = truth
-        .iter()
-        .zip(&est)
-        .map(|(a, b)| b / ne - a / nt)
-        .collect();
-    println!("normalised magnitude error (RMS / RMS) {:.4}", norm(&err));
+    println!(
+        "normalised magnitude error: start {:.4}, estimate {:.4}",
+        normalised_magnitude_error(&start),
+        normalised_magnitude_error(&estimate)
+    );
     println!(
         "loglik trace: first {:?} last {:?}",
         fit.trace.first(),

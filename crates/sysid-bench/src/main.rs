@@ -7,6 +7,7 @@
 //! cargo run --release -p sysid-bench -- smc [--reps 21]
 //! cargo run --release -p sysid-bench -- nlbench-em [--runs 200 --iters 1000 --particles 50 --shard 0/2]
 //! cargo run --release -p sysid-bench -- pmcmc [--reps 11]
+//! cargo run --release -p sysid-bench -- wiener [--runs 100 --iters 100 --particles 100 --csv-dir out/]
 //! ```
 
 mod em;
@@ -15,6 +16,7 @@ mod lti2x2;
 mod nlbench_em;
 mod pmcmc;
 mod smc;
+mod wiener;
 
 use clap::{Parser, Subcommand};
 
@@ -61,6 +63,9 @@ enum Runner {
         #[arg(long, default_value_t = 11)]
         reps: usize,
     },
+    /// Seed-001 blind Wiener identification by gradient EM (one JSON line per
+    /// realisation, then a summary).
+    Wiener(wiener::Args),
     /// Seed-000 particle-EM study on nlbench (one JSON line per run, then a summary).
     NlbenchEm(nlbench_em::Args),
     /// Merges the outputs of `nlbench-em` shards into one set of run lines and summary.
@@ -96,6 +101,7 @@ fn main() {
         Runner::Em { reps } => em::run(reps.max(1)),
         Runner::Smc { reps } => smc::run(reps.max(1)),
         Runner::Pmcmc { reps } => pmcmc::run(reps.max(1)),
+        Runner::Wiener(args) => wiener::run(&args).unwrap_or_else(|e| exit_with(&e)),
         Runner::NlbenchEm(args) => nlbench_em::run(&args).unwrap_or_else(|e| exit_with(&e)),
         Runner::NlbenchEmMerge { files } => {
             nlbench_em::merge(&files).unwrap_or_else(|e| exit_with(&e));

@@ -83,6 +83,11 @@ pub enum CliError {
         source: sysid::em::affine::AffineEmError,
     },
     #[error("{context}: {source}")]
+    GradientEm {
+        context: String,
+        source: sysid::em::gradient::GradientEmError,
+    },
+    #[error("{context}: {source}")]
     Pmcmc {
         context: String,
         source: sysid::pmcmc::PmcmcError,
@@ -128,6 +133,14 @@ impl CliError {
                 | AffineEmError::NoSteps { .. } => true,
                 _ => false,
             },
+            CliError::GradientEm { source, .. } => {
+                use sysid::em::gradient::GradientEmError;
+                match source {
+                    GradientEmError::Smc(e) => smc_input(e),
+                    GradientEmError::InvalidParams(_) | GradientEmError::InvalidOption(_) => true,
+                    _ => false,
+                }
+            }
             CliError::Pmcmc { source, .. } => {
                 use sysid::pmcmc::PmcmcError;
                 match source {

@@ -24,8 +24,9 @@ pub use gradient_lgss::LgssGradient;
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
 pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
 pub use wiener::{
-    BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone, saturation,
-    spectral_magnitude, wiener_start,
+    BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone,
+    normalised_magnitude_error, saturation, spectral_magnitude, wiener_frequency_grid,
+    wiener_start,
 };
 
 use nalgebra::{DMatrix, dmatrix};

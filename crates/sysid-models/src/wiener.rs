@@ -522,3 +522,79 @@ pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
         r: [0.1, 0.1],
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_magnitude_does_not_depend_on_the_state_basis() {
+        // the true system in the basis where C = [1, 0]: T = [[1, 0.3], [0, 1]]
+        let a = BlindWiener::A;
+        let t = [[1.0, 0.3], [0.0, 1.0]];
+        let t_inv = [[1.0, -0.3], [0.0, 1.0]];
+        let mul = |x: [[f64; 2]; 2], y: [[f64; 2]; 2]| {
+            let mut out = [[0.0; 2]; 2];
+            for i in 0..2 {
+                for j in 0..2 {
+                    out[i][j] = x[i][0] * y[0][j] + x[i][1] * y[1][j];
+                }
+            }
+            out
+        };
+        let a2 = mul(mul(t, a), t_inv);
+        // B = e1 and T e1 = e1, so Q = B B' stays [[1, 0], [0, 0]]
+        let estimate = WienerEstimate {
+            a: a2,
+            q: [[1.0, 0.0], [0.0, 0.0]],
+            beta: BlindWiener::BETA,
+            r: BlindWiener::R,
+        };
+        for k in 1..20 {
+            let w = 0.15 * k as f64;
+            let (x, y) = (estimate.magnitude(w), BlindWiener::magnitude(w));
+            assert!((x - y).abs() < 1e-12 * y, "{w}: {x} vs {y}");
+        }
+        // and against a direct evaluation of |C (e^{iw} - A)^{-1} B| at w = 0:
+        // (I - A)^{-1} e1 = [[0, 0.9], [-1, 1]]^{-1}... solved by hand: x = (I - A)^{-1} e1
+        // with (I - A) = [[0, 0.9], [-1, 1]]: x2 = x1, 0.9 x2 = 1 -> x = [1/0.9, 1/0.9]
+        let direct = (1.0 + 0.3) / 0.9;
+        assert!((BlindWiener::magnitude(0.0) - direct).abs() < 1e-12);
+    }
+
+    #[test]
+    fn saturation_and_dead_zone() {
+        assert_eq!(saturation(-3.0, -2.0, 3.0), -2.0);
+        assert_eq!(saturation(5.0, -2.0, 3.0), 3.0);
+        assert_eq!(saturation(0.5, -2.0, 3.0), 0.5);
+        assert_eq!(dead_zone(-2.0, -1.5, 1.0), -0.5);
+        assert_eq!(dead_zone(2.0, -1.5, 1.0), 1.0);
+        assert_eq!(dead_zone(0.0, -1.5, 1.0), 0.0);
+        assert!(saturation(f64::NAN, -1.0, 1.0).is_nan());
+    }
+}
+
+/// The frequency grid of the Wiener magnitude comparisons: `pi k / 64`, `k = 1..64`.
+pub fn wiener_frequency_grid() -> Vec<f64> {
+    (1..=64)
+        .map(|k| std::f64::consts::PI * k as f64 / 64.0)
+        .collect()
+}
+
+/// The error of an estimated linear part's normalised magnitude: both magnitudes on
+/// [`wiener_frequency_grid`] are divided by their root mean square (the scale is not
+/// identifiable), and the error is the root mean square of the difference (0 for a
+/// perfect shape; 1 is as large as the response itself).
+pub fn normalised_magnitude_error(estimate: &WienerEstimate) -> f64 {
+    let grid = wiener_frequency_grid();
+    let truth: Vec<f64> = grid.iter().map(|&w| BlindWiener::magnitude(w)).collect();
+    let fitted: Vec<f64> = grid.iter().map(|&w| estimate.magnitude(w)).collect();
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let (nt, nf) = (rms(&truth), rms(&fitted));
+    let diff: Vec<f64> = truth
+        .iter()
+        .zip(&fitted)
+        .map(|(a, b)| b / nf - a / nt)
+        .collect();
+    rms(&diff)
+}

@@ -14,8 +14,9 @@ use sysid::subspace::{N4sidOptions, Order, n4sid};
 #[derive(clap::Args, Debug)]
 pub struct Options {
     /// Model class: `lti` (linear Gaussian state space, exact EM), `nlbench` (the
-    /// seed-000 benchmark, particle EM) or `affine` (particle EM for an affine model:
-    /// `--system nlbench`, or a linear model given by `--init FILE`).
+    /// seed-000 benchmark, particle EM), `affine` (particle EM for an affine model:
+    /// `--system nlbench`, or a linear model given by `--init FILE`) or `wiener`
+    /// (blind Wiener identification from y1, y2 by gradient EM, seed 001).
     pub kind: String,
     #[command(flatten)]
     pub data: DataArgs,
@@ -129,6 +130,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     match o.kind.to_ascii_lowercase().as_str() {
         "lti" => {}
         "nlbench" => return super::fit_affine::run(o, true),
+        "wiener" => return super::fit_wiener::run(o),
         "affine" => {
             return match o.system.as_deref() {
                 None => super::fit_affine::run(o, false),
@@ -143,7 +145,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             return Err(CliError::BadOption {
                 option: "fit",
                 message: format!(
-                    "unknown model class {:?} (known: lti, nlbench, affine)",
+                    "unknown model class {:?} (known: lti, nlbench, affine, wiener)",
                     o.kind
                 ),
             });

@@ -2,6 +2,7 @@
 
 pub mod fit;
 pub mod fit_affine;
+pub mod fit_wiener;
 pub mod fix;
 pub mod loglik;
 pub mod n4sid;

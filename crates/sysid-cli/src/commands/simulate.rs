@@ -8,7 +8,8 @@ use sysid::models::System;
 /// Options of `sysid simulate`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// System name: lgss, lti2x2 or nlbench.
+    /// System name: lgss, lti2x2, nlbench or wiener (the blind Wiener system; its
+    /// input is not written, it is unobserved).
     pub system: String,
     /// Number of time steps.
     #[arg(long, default_value_t = 1000)]
@@ -37,9 +38,12 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     if o.system == "nlbench" {
         return run_nlbench(o);
     }
+    if o.system == "wiener" {
+        return run_wiener(o);
+    }
     let system = System::from_name(&o.system).ok_or_else(|| CliError::UnknownSystem {
         name: o.system.clone(),
-        known: System::ALL.map(System::name).join(", ") + ", nlbench",
+        known: System::ALL.map(System::name).join(", ") + ", nlbench, wiener",
     })?;
     let sim = system
         .simulate(o.steps, o.seed)
@@ -128,5 +132,40 @@ fn run_nlbench(o: &Options) -> Result<(), CliError> {
             o.out.display()
         ));
     }
+    Ok(())
+}
+
+/// The blind Wiener system: outputs y1, y2 (and with `--states` the linear part's
+/// output z); the input is unobserved and not written.
+fn run_wiener(o: &Options) -> Result<(), CliError> {
+    if o.model_out.is_some() {
+        return Err(CliError::BadOption {
+            option: "--model-out",
+            message: "wiener is not a linear Gaussian model and has no model file".into(),
+        });
+    }
+    let sim = sysid::models::BlindWiener::simulate(o.steps, o.seed);
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    writeln!(w, "{}", if o.states { "t,y1,y2,z" } else { "t,y1,y2" }).map_err(io)?;
+    for (t, (y, &z)) in sim.outputs.chunks_exact(2).zip(&sim.z).enumerate() {
+        let mut row = format!("{},{},{}", t + 1, fmt(y[0]), fmt(y[1]));
+        if o.states {
+            row += &format!(",{}", fmt(z));
+        }
+        writeln!(w, "{row}").map_err(io)?;
+    }
+    w.flush().map_err(io)?;
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "simulate", "system": "wiener", "steps": o.steps, "seed": o.seed,
+            "out": o.out,
+        }),
+        || format!("wrote {} steps of wiener to {}", o.steps, o.out.display()),
+    );
     Ok(())
 }

@@ -523,6 +523,31 @@ pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
     })
 }
 
+/// The frequency grid of the Wiener magnitude comparisons: `pi k / 64`, `k = 1..64`.
+pub fn wiener_frequency_grid() -> Vec<f64> {
+    (1..=64)
+        .map(|k| std::f64::consts::PI * k as f64 / 64.0)
+        .collect()
+}
+
+/// The error of an estimated linear part's normalised magnitude: both magnitudes on
+/// [`wiener_frequency_grid`] are divided by their root mean square (the scale is not
+/// identifiable), and the error is the root mean square of the difference (0 for a
+/// perfect shape; 1 is as large as the response itself).
+pub fn normalised_magnitude_error(estimate: &WienerEstimate) -> f64 {
+    let grid = wiener_frequency_grid();
+    let truth: Vec<f64> = grid.iter().map(|&w| BlindWiener::magnitude(w)).collect();
+    let fitted: Vec<f64> = grid.iter().map(|&w| estimate.magnitude(w)).collect();
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let (nt, nf) = (rms(&truth), rms(&fitted));
+    let diff: Vec<f64> = truth
+        .iter()
+        .zip(&fitted)
+        .map(|(a, b)| b / nf - a / nt)
+        .collect();
+    rms(&diff)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -572,29 +597,4 @@ mod tests {
         assert_eq!(dead_zone(0.0, -1.5, 1.0), 0.0);
         assert!(saturation(f64::NAN, -1.0, 1.0).is_nan());
     }
-}
-
-/// The frequency grid of the Wiener magnitude comparisons: `pi k / 64`, `k = 1..64`.
-pub fn wiener_frequency_grid() -> Vec<f64> {
-    (1..=64)
-        .map(|k| std::f64::consts::PI * k as f64 / 64.0)
-        .collect()
-}
-
-/// The error of an estimated linear part's normalised magnitude: both magnitudes on
-/// [`wiener_frequency_grid`] are divided by their root mean square (the scale is not
-/// identifiable), and the error is the root mean square of the difference (0 for a
-/// perfect shape; 1 is as large as the response itself).
-pub fn normalised_magnitude_error(estimate: &WienerEstimate) -> f64 {
-    let grid = wiener_frequency_grid();
-    let truth: Vec<f64> = grid.iter().map(|&w| BlindWiener::magnitude(w)).collect();
-    let fitted: Vec<f64> = grid.iter().map(|&w| estimate.magnitude(w)).collect();
-    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
-    let (nt, nf) = (rms(&truth), rms(&fitted));
-    let diff: Vec<f64> = truth
-        .iter()
-        .zip(&fitted)
-        .map(|(a, b)| b / nf - a / nt)
-        .collect();
-    rms(&diff)
 }

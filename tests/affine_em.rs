@@ -2,6 +2,8 @@
 //! against the exact linear EM M-step on Kalman statistics; particle EM against exact
 //! EM on `lgss`.
 
+mod common;
+
 use nalgebra::{DMatrix, DVector, dmatrix};
 use sysid::em::affine::{
     AffineEm, AffineEmSpec, AffineModel, AffineStatistics, StatisticsCollector, m_step,
@@ -222,23 +224,7 @@ fn particle_em_on_lgss_reaches_the_exact_em_estimate() {
     }
     for (i, name) in ["A", "Q"].iter().enumerate() {
         let values: Vec<f64> = tail.iter().map(|v| v[i]).collect();
-        let mean = values.iter().sum::<f64>() / values.len() as f64;
-        let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
-            / (values.len() - 1) as f64)
-            .sqrt();
-        eprintln!(
-            "{name}: particle EM {mean:.5} (sd {sd:.5}), exact EM {:.5}",
-            exact[i]
-        );
-        assert!(
-            sd < 0.05 * exact[i].abs(),
-            "{name}: too noisy to test ({sd})"
-        );
-        assert!(
-            (mean - exact[i]).abs() < 4.0 * sd.max(1e-3 * exact[i].abs()),
-            "{name}: {mean} vs {}",
-            exact[i]
-        );
+        common::assert_iterates_match("particle EM", name, &values, exact[i]);
     }
     let _ = affine.smc_model(&current).unwrap();
 }

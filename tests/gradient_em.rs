@@ -2,6 +2,8 @@
 //! against central differences, the BFGS M-step against the closed-form maximiser of
 //! Q^ on fixed trajectories, and the EM fixed point against exact (Kalman) EM.
 
+mod common;
+
 use proptest::prelude::*;
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions, m_step, q_hat};
 use sysid::em::linear::{Covariance, LinearEm, LinearEmSpec};
@@ -220,23 +222,7 @@ fn gradient_em_on_lgss_reaches_the_exact_em_estimate() {
     }
     for (i, name) in ["phi", "q"].iter().enumerate() {
         let values: Vec<f64> = tail.iter().map(|v| v[i]).collect();
-        let mean = values.iter().sum::<f64>() / values.len() as f64;
-        let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
-            / (values.len() - 1) as f64)
-            .sqrt();
-        eprintln!(
-            "{name}: gradient EM {mean:.5} (sd {sd:.5}), exact EM {:.5}",
-            exact[i]
-        );
-        assert!(
-            sd < 0.05 * exact[i].abs(),
-            "{name}: too noisy to test ({sd})"
-        );
-        assert!(
-            (mean - exact[i]).abs() < 4.0 * sd.max(1e-3 * exact[i].abs()),
-            "{name}: {mean} vs {}",
-            exact[i]
-        );
+        common::assert_iterates_match("gradient EM", name, &values, exact[i]);
     }
 }
 

@@ -16,3 +16,10 @@ pub use runner::{
     EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError, Termination,
     relative_change, run_em,
 };
+
+/// A seed for piece `k` of the work seeded by `seed` (the particle E-steps' filter and
+/// smoother streams).
+pub(crate) fn sub_seed(seed: u64, k: u64) -> u64 {
+    use rand::RngExt;
+    sysid_smc::stream(seed, k).random()
+}

@@ -35,9 +35,8 @@ pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
 pub use stats::{AffineStatistics, StatisticsCollector};
 
-use crate::EmAlgorithm;
 use crate::linear::Covariance;
-use rand::RngExt;
+use crate::{EmAlgorithm, sub_seed};
 use sysid_smc::{FilterOptions, ParticleFilter, Series, SmcError, Smoother};
 
 /// Errors of affine EM.
@@ -101,11 +100,6 @@ pub struct AffineEm<'a, A, S> {
     filter: ParticleFilter,
     seed: u64,
     iteration: u64,
-}
-
-/// A seed for piece `k` of the work seeded by `seed`.
-fn sub_seed(seed: u64, k: u64) -> u64 {
-    sysid_smc::stream(seed, k).random()
 }
 
 impl<'a, A: AffineModel, S: Smoother<A::Smc>> AffineEm<'a, A, S> {

@@ -40,8 +40,7 @@ pub use model::{GradientModel, Gradients, central_difference};
 pub use mstep::{MStepOptions, MStepOutcome, m_step};
 pub use objective::q_hat;
 
-use crate::EmAlgorithm;
-use rand::RngExt;
+use crate::{EmAlgorithm, sub_seed};
 use sysid_smc::{FilterOptions, ParticleFilter, Series, SmcError, Smoother};
 
 /// Errors of gradient EM.
@@ -77,10 +76,6 @@ pub struct GradientEm<'a, G, S> {
     seed: u64,
     iteration: u64,
     last: Option<MStepOutcome>,
-}
-
-fn sub_seed(seed: u64, k: u64) -> u64 {
-    sysid_smc::stream(seed, k).random()
 }
 
 impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {

@@ -1,6 +1,10 @@
 //! One realisation of blind Wiener identification (seed 001, ALGORITHMS.md 4): N4SID on
 //! y1 for the linear part, then gradient EM with FFBSi-reject trajectories.
 //! Usage: `cargo run --release --example wiener_em [seed] [iterations] [bfgs iterations]`.
+//! Diagnostics of the start: `WIENER_START=truth` (start at the true system),
+//! `WIENER_BETA=truth` (true breakpoints, the rest as the lecture), `WIENER_R0=v` (both
+//! noise variances start at v). Prints the filter's log-likelihood at the start with
+//! M = 100 and M = 10 000.
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
 use sysid::em::{EmOptions, run_em};
 use sysid::models::{
@@ -17,7 +21,54 @@ fn main() {
         .map_or(50, |v| v.parse().expect("BFGS iterations"));
     let sim = BlindWiener::simulate(1000, seed);
     let data = Series::new(&sim.outputs, 2).expect("finite");
-    let start = wiener_start(&sim.outputs).expect("N4SID");
+    // `WIENER_START=truth` starts at the true system (in the basis C = [1, 0], with a
+    // small noise on x2 so that Q is positive definite), to tell a poor start from a
+    // drift of EM itself.
+    let start = if std::env::var("WIENER_START").as_deref() == Ok("truth") {
+        let a = BlindWiener::A;
+        // T = [[1, 0.3], [0, 1]]: A' = T A T^{-1}
+        let a2 = [
+            [
+                a[0][0] + 0.3 * a[1][0],
+                -0.3 * (a[0][0] + 0.3 * a[1][0]) + a[0][1] + 0.3 * a[1][1],
+            ],
+            [a[1][0], -0.3 * a[1][0] + a[1][1]],
+        ];
+        WienerEstimate {
+            a: a2,
+            q: [[1.0, 0.0], [0.0, 1e-4]],
+            beta: BlindWiener::BETA,
+            r: BlindWiener::R,
+        }
+    } else {
+        let mut start = wiener_start(&sim.outputs).expect("N4SID");
+        // `WIENER_R0=v` starts both noise variances at v; `WIENER_BETA=truth` starts the
+        // breakpoints at the truth (diagnostics of the lecture's start)
+        if let Some(r0) = std::env::var("WIENER_R0").ok().and_then(|v| v.parse().ok()) {
+            start.r = [r0, r0];
+        }
+        if std::env::var("WIENER_BETA").as_deref() == Ok("truth") {
+            start.beta = BlindWiener::BETA;
+        }
+        start
+    };
+    {
+        use sysid::smc::{FilterOptions, ParticleFilter};
+        let smc = WienerModel::default()
+            .smc_model(&start.theta().expect("start"))
+            .expect("model");
+        for m in [100, 10_000] {
+            let mut pf = ParticleFilter::new(FilterOptions {
+                particles: m,
+                ..Default::default()
+            })
+            .expect("pf");
+            let l: Vec<f64> = (0..3)
+                .map(|r| pf.run(&smc, &data, r).expect("pf").loglik)
+                .collect();
+            println!("filter log-likelihood at the start, M = {m}: {l:?}");
+        }
+    }
     let model = WienerModel::default();
     let smoother = FfbsiReject {
         paths: 100,

@@ -402,3 +402,34 @@ fn bad_starts_and_options_are_typed_errors() {
     .unwrap_err();
     assert!(err.to_string().contains("at least 2 particles"), "{err}");
 }
+
+#[test]
+fn conditional_smc_refuses_bad_trajectories() {
+    let (_, y) = lgss_data(20, 5);
+    let data = Series::new(&y, 1).unwrap();
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let mut csmc = ConditionalSmc::new(5, CsmcKernel::AncestorSampling).unwrap();
+    let mut rng = stream(1, 0);
+    let mut short = vec![0.0; 19];
+    let err = csmc
+        .sample(&model, &data, None, &mut short, &mut rng)
+        .unwrap_err();
+    assert!(err.to_string().contains("output trajectory"), "{err}");
+    let mut path = vec![0.0; 20];
+    let mut reference = vec![0.0; 20];
+    reference[7] = f64::NAN;
+    let err = csmc
+        .sample(&model, &data, Some(&reference), &mut path, &mut rng)
+        .unwrap_err();
+    assert!(err.to_string().contains("time 7"), "{err}");
+    let err = csmc
+        .sample(&model, &data, Some(&reference[..10]), &mut path, &mut rng)
+        .unwrap_err();
+    assert!(err.to_string().contains("reference trajectory"), "{err}");
+    // nothing to add before a successful sweep: no panic
+    let mut count = 0;
+    ConditionalSmc::new(3, CsmcKernel::Plain)
+        .unwrap()
+        .add_weighted_paths(&mut |_: usize, _: &[f64], _: Option<&[f64]>, _: f64| count += 1);
+    assert_eq!(count, 0);
+}

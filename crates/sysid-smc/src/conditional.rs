@@ -194,6 +194,14 @@ impl ConditionalSmc {
         out: &mut [f64],
         rng: &mut R,
     ) -> Result<CsmcSummary, SmcError> {
+        let expected = data.steps() * model.state_dim();
+        if out.len() != expected {
+            return Err(SmcError::DimensionMismatch {
+                what: "output trajectory",
+                expected: format!("T x n = {} x {} values", data.steps(), model.state_dim()),
+                found: out.len(),
+            });
+        }
         self.forward(model, data, reference, rng)?;
         match self.kernel {
             CsmcKernel::BackwardSimulation => self.backward_simulate(model, data, out, rng)?,
@@ -210,7 +218,11 @@ impl ConditionalSmc {
     /// Adds every traced path of the last sweep's particle system to `functional`,
     /// path `i` (traced back from `x_{T-1}^i`) with weight `W_{T-1}^i`: the
     /// Rao-Blackwellised estimate of `E[sum_t s(t, x_t, x_{t+1}) | y]` that PSAEM uses.
+    /// Adds nothing before the first sweep.
     pub fn add_weighted_paths<F: AdditiveFunctional + ?Sized>(&self, functional: &mut F) {
+        if self.steps == 0 {
+            return;
+        }
         let (n, m, last) = (self.state_dim, self.particles, self.steps - 1);
         let mut index: Vec<usize> = (0..m).collect();
         let mut next = vec![0.0; m * n];

@@ -73,7 +73,8 @@ impl<G: GradientModel> NegativeQ<'_, G> {
             )));
         }
         let mut grad = vec![0.0; theta.len()];
-        let q = q_hat(self.model, theta, self.paths, self.data, Some(&mut grad));
+        let q = q_hat(self.model, theta, self.paths, self.data, Some(&mut grad))
+            .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
         *self.evaluations.borrow_mut() += 1;
         if !q.is_finite() || grad.iter().any(|g| !g.is_finite()) {
             return Err(argmin::core::Error::msg(format!(
@@ -124,7 +125,7 @@ pub fn m_step<G: GradientModel>(
     options: &MStepOptions,
 ) -> Result<MStepOutcome, GradientEmError> {
     let d = start.len();
-    let q_before = q_hat(model, start, paths, data, None);
+    let q_before = q_hat(model, start, paths, data, None)?;
     if !q_before.is_finite() {
         return Err(GradientEmError::NonFiniteQ {
             theta: start.to_vec(),
@@ -173,7 +174,7 @@ pub fn m_step<G: GradientModel>(
         status,
     };
     if let Some(theta) = candidate {
-        let q = q_hat(model, &theta, paths, data, None);
+        let q = q_hat(model, &theta, paths, data, None)?;
         if q.is_finite() && q >= q_before {
             outcome.theta = theta;
             outcome.q_after = q;

@@ -1,7 +1,7 @@
 //! The intermediate quantity `Q^(theta)` on fixed smoothed trajectories, with its
 //! gradient.
 
-use super::{GradientModel, Gradients, central_difference};
+use super::{GradientEmError, GradientModel, Gradients, central_difference};
 use sysid_smc::{Series, Trajectories};
 
 /// `Q^(theta) = I1 + I2 + I3` of ALGORITHMS.md 4 for the `K` paths of `paths`:
@@ -13,20 +13,39 @@ use sysid_smc::{Series, Trajectories};
 /// With `grad`, its gradient is written there: from the model's analytic gradients, or
 /// by central differences of `Q^`. Summation runs in a fixed order, so the value is
 /// reproducible.
+///
+/// Errors when `theta` (or `grad`) does not have the model's number of parameters, or
+/// the trajectories do not fit the model's state dimension or the data's length.
 pub fn q_hat<G: GradientModel>(
     model: &G,
     theta: &[f64],
     paths: &Trajectories,
     data: &Series,
     grad: Option<&mut [f64]>,
-) -> f64 {
-    match (grad, model.gradients()) {
+) -> Result<f64, GradientEmError> {
+    let d = model.parameter_dim();
+    if theta.len() != d || grad.as_ref().is_some_and(|g| g.len() != d) {
+        return Err(GradientEmError::InvalidParams(format!(
+            "the model has {d} parameters; theta has {}",
+            theta.len()
+        )));
+    }
+    if paths.state_dim() != model.state_dim() || paths.steps() != data.steps() {
+        return Err(GradientEmError::InvalidParams(format!(
+            "trajectories of {} steps of dimension {} do not fit {} data steps and state dimension {}",
+            paths.steps(),
+            paths.state_dim(),
+            data.steps(),
+            model.state_dim()
+        )));
+    }
+    Ok(match (grad, model.gradients()) {
         (None, _) => sum_terms(model, theta, paths, data, None),
         (Some(grad), Gradients::Analytic) => sum_terms(model, theta, paths, data, Some(grad)),
         (Some(grad), Gradients::FiniteDifferences) => {
             central_difference(theta, grad, |th| sum_terms(model, th, paths, data, None))
         }
-    }
+    })
 }
 
 fn sum_terms<G: GradientModel>(

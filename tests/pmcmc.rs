@@ -8,7 +8,7 @@ use sysid::kalman::{KalmanWorkspace, Record};
 use sysid::models::{LgssConjugate, LgssFamily, LinearGaussianSmc, System, lgss};
 use sysid::pmcmc::{
     Chain, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily, ParameterStep,
-    PmmhOptions, effective_sample_size, particle_gibbs, pmmh, summarise,
+    PmmhOptions, effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
 };
 use sysid::smc::{ConditionalSmc, CsmcKernel, Rng, Series, stream};
 
@@ -140,6 +140,24 @@ fn pmmh_and_particle_gibbs_reach_the_exact_posterior() {
         .unwrap();
         assert_matches_exact(kernel.name(), &chains, &exact);
     }
+    let guided = particle_gibbs_guided(
+        &family,
+        &prior(),
+        &conjugate(),
+        &data,
+        &start,
+        &GibbsOptions {
+            iterations: 6_000,
+            burn_in: 1_000,
+            particles: 10,
+            kernel: CsmcKernel::AncestorSampling,
+        },
+        4,
+        8,
+        &(),
+    )
+    .unwrap();
+    assert_matches_exact("guided PGAS", &guided, &exact);
 }
 
 #[test]
@@ -200,23 +218,34 @@ fn conditional_smc_kernels_leave_the_smoothing_distribution_invariant() {
         (0..steps).map(|t| out.mean(t)[0]).collect()
     };
     let model = LinearGaussianSmc::new(&lgss()).unwrap();
-    for (kernel, particles) in [
-        (CsmcKernel::AncestorSampling, 5),
-        (CsmcKernel::BackwardSimulation, 5),
-        (CsmcKernel::Plain, 50),
+    for (kernel, particles, guided) in [
+        (CsmcKernel::AncestorSampling, 5, false),
+        (CsmcKernel::BackwardSimulation, 5, false),
+        (CsmcKernel::Plain, 50, false),
+        (CsmcKernel::AncestorSampling, 3, true),
+        (CsmcKernel::BackwardSimulation, 3, true),
     ] {
+        let name = format!("{}{}", kernel.name(), if guided { " (guided)" } else { "" });
         let mut csmc = ConditionalSmc::new(particles, kernel).unwrap();
         let mut rng = stream(3, 0);
         let mut path = vec![0.0; steps];
-        csmc.sample(&model, &data, None, &mut path, &mut rng)
-            .unwrap();
+        let sweep = |csmc: &mut ConditionalSmc,
+                     reference: Option<&[f64]>,
+                     path: &mut [f64],
+                     rng: &mut Rng| {
+            if guided {
+                csmc.sample_guided(&model, &data, reference, path, rng)
+            } else {
+                csmc.sample(&model, &data, reference, path, rng)
+            }
+        };
+        sweep(&mut csmc, None, &mut path, &mut rng).unwrap();
         let iterations = 20_000;
         let mut draws: Vec<Vec<f64>> = (0..steps).map(|_| Vec::with_capacity(iterations)).collect();
         let mut reference = path.clone();
         for _ in 0..iterations {
             reference.copy_from_slice(&path);
-            csmc.sample(&model, &data, Some(&reference), &mut path, &mut rng)
-                .unwrap();
+            sweep(&mut csmc, Some(&reference), &mut path, &mut rng).unwrap();
             for (d, &x) in draws.iter_mut().zip(&path) {
                 d.push(x);
             }
@@ -231,12 +260,11 @@ fn conditional_smc_kernels_leave_the_smoothing_distribution_invariant() {
             worst = worst.max(z);
             assert!(
                 z < 4.5,
-                "{}: t = {t}, chain mean {mean} vs RTS {} ({z:.2} se)",
-                kernel.name(),
+                "{name}: t = {t}, chain mean {mean} vs RTS {} ({z:.2} se)",
                 rts[t]
             );
         }
-        assert!(worst > 0.5, "{}: suspiciously exact", kernel.name());
+        assert!(worst > 0.5, "{name}: suspiciously exact");
     }
 }
 
@@ -252,9 +280,15 @@ fn ancestor_sampling_mixes_with_ten_particles_where_plain_particle_gibbs_degener
         particles: 10,
         kernel,
     };
-    let rates = |kernel| {
-        let chains = particle_gibbs(
-            &LgssFamily::default(),
+    let family = LgssFamily::default();
+    let rates = |kernel, guided: bool| {
+        let run = if guided {
+            particle_gibbs_guided
+        } else {
+            particle_gibbs
+        };
+        let chains = run(
+            &family,
             &prior(),
             &Fixed,
             &data,
@@ -267,41 +301,51 @@ fn ancestor_sampling_mixes_with_ten_particles_where_plain_particle_gibbs_degener
         .unwrap();
         chains[0].state_update_rate.clone().unwrap()
     };
-    let pgas = rates(CsmcKernel::AncestorSampling);
-    // At a few steps where y jumps by several innovation sd, the reference (drawn from
-    // the smoothing distribution) outweighs every bootstrap proposal of the 9 free
-    // particles, and no bootstrap-proposal kernel with 10 particles moves x_t there
-    // often (docs/pmcmc.md); elsewhere PGAS renews x_t most of the time.
-    let mut sorted = pgas.clone();
-    sorted.sort_by(f64::total_cmp);
-    let below = pgas.iter().filter(|&&r| r < 0.5).count();
+    let summary = |rates: &[f64]| {
+        let mut sorted = rates.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        (sorted[0], sorted[steps / 10], sorted[steps / 2])
+    };
+    // PGAS with the locally optimal proposal: the free particles follow the data, so
+    // x_t is renewed at every step
+    let guided = rates(CsmcKernel::AncestorSampling, true);
+    let (min, _, median) = summary(&guided);
+    eprintln!("guided PGAS M = 10: update rate min {min:.3}, median {median:.3}");
+    assert!(min >= 0.5, "guided PGAS update rate falls to {min}");
+    // Bootstrap PGAS: at a few steps where y jumps by several innovation sd, the
+    // reference (drawn from the smoothing distribution) outweighs every blind proposal
+    // of the 9 free particles, and x_t is rarely renewed there (docs/pmcmc.md)
+    let bootstrap = rates(CsmcKernel::AncestorSampling, false);
+    let (min, decile, median) = summary(&bootstrap);
+    let below = bootstrap.iter().filter(|&&r| r < 0.5).count();
     eprintln!(
-        "PGAS M = 10: update rate min {:.3}, 5 % quantile {:.3}, median {:.3}; {below} of {steps} steps below 0.5",
-        sorted[0],
-        sorted[steps / 20],
-        sorted[steps / 2]
+        "bootstrap PGAS M = 10: min {min:.3}, 10 % quantile {decile:.3}, median {median:.3}; {below} of {steps} steps below 0.5"
     );
     assert!(
-        sorted[steps / 10] >= 0.5,
-        "PGAS: more than 10 % of steps below 0.5"
+        decile >= 0.5,
+        "bootstrap PGAS: more than 10 % of steps below 0.5"
     );
     assert!(
-        sorted[steps / 2] >= 0.75,
-        "PGAS: median update rate {}",
-        sorted[steps / 2]
+        median >= 0.75,
+        "bootstrap PGAS: median update rate {median}"
     );
-    let plain = rates(CsmcKernel::Plain);
-    let early: f64 = plain[..50].iter().sum::<f64>() / 50.0;
-    let late = plain[steps - 1];
-    eprintln!("plain PG M = 10: mean update rate over t < 50 {early:.3}, at T - 1 {late:.3}");
-    assert!(
-        early < 0.1,
-        "plain particle Gibbs did not degenerate: {early}"
-    );
-    assert!(
-        late > 0.5,
-        "plain particle Gibbs should still move at the end: {late}"
-    );
+    // Plain particle Gibbs degenerates far from T - 1, guided or not
+    for guided in [false, true] {
+        let plain = rates(CsmcKernel::Plain, guided);
+        let early: f64 = plain[..50].iter().sum::<f64>() / 50.0;
+        let late = plain[steps - 1];
+        eprintln!(
+            "plain PG M = 10 (guided {guided}): mean update rate over t < 50 {early:.3}, at T - 1 {late:.3}"
+        );
+        assert!(
+            early < 0.1,
+            "plain particle Gibbs did not degenerate: {early}"
+        );
+        assert!(
+            late > 0.5,
+            "plain particle Gibbs should still move at the end: {late}"
+        );
+    }
 }
 
 #[test]

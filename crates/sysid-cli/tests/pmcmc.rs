@@ -88,6 +88,27 @@ fn pgas_equals_the_library_for_any_thread_count_and_finds_the_truth() {
 }
 
 #[test]
+fn guided_pgas_runs_and_reports_every_step_renewed() {
+    let dir = scratch_dir();
+    let (data, _) = lgss_data(&dir, 200);
+    let summary = json_of(&sysid(&[
+        "pgas",
+        "--system",
+        "lgss",
+        "--data",
+        s(&data),
+        "--iters",
+        "400",
+        "--chains",
+        "2",
+        "--guided",
+        "--json",
+    ]));
+    let rate = summary["min_state_update_rate"].as_f64().unwrap();
+    assert!(rate > 0.5, "guided PGAS lowest update rate {rate}");
+}
+
+#[test]
 fn pmmh_runs_and_reports_acceptance_and_diagnostics() {
     let dir = scratch_dir();
     let (data, _) = lgss_data(&dir, 100);
@@ -157,6 +178,20 @@ fn bad_pmcmc_input_gives_one_line_errors_and_no_file() {
         assert_one_line_error(&sysid(&args), &needles);
         assert!(!out.exists(), "{head:?} left a file");
     }
+    let nl = simulate(&dir, "nlbench", 50, 1);
+    assert_one_line_error(
+        &sysid(&[
+            "pgas",
+            "--guided",
+            "--system",
+            "nlbench",
+            "--data",
+            s(&nl),
+            "--out",
+            s(&out),
+        ]),
+        &["--guided", "nlbench"],
+    );
     std::fs::write(&prior, r#"{"sigma": {"family": "flat"}}"#).unwrap();
     let mut args = vec!["pmmh", "--prior", s(&prior)];
     args.extend(base);

@@ -7,8 +7,8 @@ use rand_distr::{Distribution, StandardNormal};
 use sysid_kalman::LinearGaussianModel;
 use sysid_linalg::{LinalgError, cholesky_upper};
 use sysid_smc::{
-    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
-    TransitionDensity, TransitionSampler,
+    GuidedProposal, InitialDensity, InitialSampler, ObservationDensity, StateSpace,
+    TransitionBound, TransitionDensity, TransitionSampler,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -40,6 +40,57 @@ pub enum AdapterError {
 /// Row-major copy of a matrix.
 fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
     m.transpose().as_slice().to_vec()
+}
+
+/// The Gaussian update of a prior `N(m, P)` by `y = C x + e`, `e ~ N(0, R)`, in the
+/// form the guided proposal needs (row-major): the gain `K = P C' S^{-1}`, a factor
+/// `F` with `F F' = P - K C P`, and the factor of `S = C P C' + R` for `log p(y)`.
+#[derive(Debug, Clone, PartialEq)]
+struct Guide {
+    gain: Vec<f64>,
+    posterior_factor: Vec<f64>,
+    s_lower: Vec<f64>,
+    log_norm_s: f64,
+}
+
+impl Guide {
+    fn new(prior: &DMatrix<f64>, c: &DMatrix<f64>, r: &DMatrix<f64>) -> Result<Self, AdapterError> {
+        let s = c * prior * c.transpose() + r;
+        let s_upper = cholesky_upper("C P C' + R", &s)?;
+        let p = s.nrows();
+        let pc = prior * c.transpose();
+        // K = P C' S^{-1}: solve U'U K' = C P with the factor S = U'U
+        let singular = || {
+            AdapterError::Singular(LinalgError::NotPositiveDefinite {
+                name: "C P C' + R".into(),
+                pivot: 0,
+                value: 0.0,
+            })
+        };
+        let half = s_upper
+            .transpose()
+            .solve_lower_triangular(&pc.transpose())
+            .ok_or_else(singular)?;
+        let gain = s_upper
+            .solve_upper_triangular(&half)
+            .ok_or_else(singular)?
+            .transpose();
+        let posterior = prior - &gain * c * prior;
+        let posterior = (&posterior + posterior.transpose()) * 0.5;
+        // a factor by the symmetric eigen-decomposition (posterior may be singular)
+        let eig = posterior.symmetric_eigen();
+        let n = prior.nrows();
+        let factor = DMatrix::from_fn(n, n, |i, j| {
+            eig.eigenvectors[(i, j)] * eig.eigenvalues[j].max(0.0).sqrt()
+        });
+        let half_logdet: f64 = (0..p).map(|i| s_upper[(i, i)].ln()).sum();
+        Ok(Guide {
+            gain: row_major(&gain),
+            posterior_factor: row_major(&factor),
+            s_lower: row_major(&s_upper.transpose()),
+            log_norm_s: -0.5 * p as f64 * LN_2PI - half_logdet,
+        })
+    }
 }
 
 /// A [`LinearGaussianModel`] seen through the SMC capability traits.
@@ -78,6 +129,9 @@ pub struct LinearGaussianSmc {
     /// Lower Cholesky factor of P1 (row-major) and the log normaliser of `N(mu, P1)`,
     /// when P1 is positive definite.
     p1_lower: Option<(Vec<f64>, f64)>,
+    /// The locally optimal proposal from a state (`P = Q`) and for `x_0` (`P = P1`).
+    guide_step: Guide,
+    guide_initial: Guide,
     log_norm_q: f64,
     log_norm_r: f64,
 }
@@ -112,6 +166,8 @@ impl LinearGaussianSmc {
             q_lower: row_major(&q_upper.transpose()),
             r_lower: row_major(&r_upper.transpose()),
             r_full: row_major(model.r()),
+            guide_step: Guide::new(model.q(), model.c(), model.r())?,
+            guide_initial: Guide::new(model.p1(), model.c(), model.r())?,
             p1_lower: cholesky_upper("P1", model.p1()).ok().map(|u| {
                 let norm = -0.5 * n as f64 * LN_2PI - half_logdet(&u);
                 (row_major(&u.transpose()), norm)
@@ -211,6 +267,97 @@ impl InitialDensity for LinearGaussianSmc {
             None if x == self.mu.as_slice() => 0.0,
             None => f64::NEG_INFINITY,
         }
+    }
+}
+
+impl LinearGaussianSmc {
+    /// `prior_mean` updated by `y` through `guide`: writes the posterior mean into `out`
+    /// and returns `log p(y)`; `prior_mean` is the state's mean before the update.
+    fn guided_update(
+        &self,
+        guide: &Guide,
+        prior_mean: &[f64],
+        u: &[f64],
+        y: &[f64],
+        out: &mut [f64],
+    ) -> f64 {
+        let (n, p) = (self.n, self.p);
+        let mut innovation = [0.0; MAX_DIM];
+        let e = &mut innovation[..p];
+        e.copy_from_slice(&self.h);
+        Self::add_product(&self.c, n, prior_mean, e);
+        Self::add_product(&self.d, self.m, u, e);
+        for (ei, &yi) in e.iter_mut().zip(y) {
+            *ei = yi - *ei;
+        }
+        out.copy_from_slice(prior_mean);
+        Self::add_product(&guide.gain, p, e, out);
+        guide.log_norm_s - 0.5 * Self::whitened_norm2(&guide.s_lower, p, e)
+    }
+
+    /// `mean + F z` with `z ~ N(0, I)`.
+    fn add_noise<R: Rng + ?Sized>(guide: &Guide, n: usize, x: &mut [f64], rng: &mut R) {
+        let mut z = [0.0; MAX_DIM];
+        for v in z[..n].iter_mut() {
+            *v = StandardNormal.sample(rng);
+        }
+        Self::add_product(&guide.posterior_factor, n, &z[..n], x);
+    }
+}
+
+/// The locally optimal proposal of the linear Gaussian model: a Kalman measurement
+/// update of the transition (or of `N(mu, P1)` at `t = 0`) by the next output.
+impl GuidedProposal for LinearGaussianSmc {
+    fn sample_initial_guided<R: Rng + ?Sized>(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        x: &mut [f64],
+        rng: &mut R,
+    ) {
+        self.guided_update(&self.guide_initial, &self.mu, u, y, x);
+        Self::add_noise(&self.guide_initial, self.n, x, rng);
+    }
+
+    fn log_initial_predictive(&self, u: &[f64], y: &[f64]) -> f64 {
+        let mut out = [0.0; MAX_DIM];
+        self.guided_update(&self.guide_initial, &self.mu, u, y, &mut out[..self.n])
+    }
+
+    fn log_predictive(
+        &self,
+        _t: usize,
+        x: &[f64],
+        u: &[f64],
+        u_next: &[f64],
+        y_next: &[f64],
+    ) -> f64 {
+        let mut mean = [0.0; MAX_DIM];
+        let mut out = [0.0; MAX_DIM];
+        self.transition_mean(x, u, &mut mean[..self.n]);
+        self.guided_update(
+            &self.guide_step,
+            &mean[..self.n],
+            u_next,
+            y_next,
+            &mut out[..self.n],
+        )
+    }
+
+    fn sample_guided<R: Rng + ?Sized>(
+        &self,
+        _t: usize,
+        x: &[f64],
+        u: &[f64],
+        u_next: &[f64],
+        y_next: &[f64],
+        next: &mut [f64],
+        rng: &mut R,
+    ) {
+        let mut mean = [0.0; MAX_DIM];
+        self.transition_mean(x, u, &mut mean[..self.n]);
+        self.guided_update(&self.guide_step, &mean[..self.n], u_next, y_next, next);
+        Self::add_noise(&self.guide_step, self.n, next, rng);
     }
 }
 

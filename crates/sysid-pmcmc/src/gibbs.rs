@@ -33,8 +33,8 @@ use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use sysid_smc::{
-    ConditionalSmc, CsmcKernel, InitialDensity, ObservationDensity, Rng, Series, TransitionDensity,
-    stream,
+    ConditionalSmc, CsmcKernel, CsmcSummary, GuidedProposal, InitialDensity, ObservationDensity,
+    Rng, Series, SmcError, TransitionDensity, stream,
 };
 
 use crate::family::{Transform, check_start};
@@ -95,6 +95,65 @@ pub fn particle_gibbs<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     seed: u64,
     observer: &dyn ChainObserver,
 ) -> Result<Vec<Chain>, PmcmcError> {
+    check_options(options)?;
+    check_start(family, start)?;
+    let sweep = |csmc: &mut ConditionalSmc,
+                 model: &F::Model,
+                 reference: Option<&[f64]>,
+                 out: &mut [f64],
+                 rng: &mut Rng| csmc.sample(model, data, reference, out, rng);
+    run_chains(
+        family, prior, step, data, start, options, chains, seed, observer, &sweep,
+    )
+}
+
+/// As [`particle_gibbs`], with the conditional SMC's locally optimal proposal
+/// (`ConditionalSmc::sample_guided`) for models that provide one
+/// ([`GuidedProposal`]): with informative observations the state trajectory is then
+/// renewed at every step even with very few particles.
+#[allow(clippy::too_many_arguments)]
+pub fn particle_gibbs_guided<F, P, S>(
+    family: &F,
+    prior: &P,
+    step: &S,
+    data: &Series,
+    start: &[f64],
+    options: &GibbsOptions,
+    chains: usize,
+    seed: u64,
+    observer: &dyn ChainObserver,
+) -> Result<Vec<Chain>, PmcmcError>
+where
+    F: ModelFamily,
+    F::Model: GuidedProposal,
+    P: Prior,
+    S: ParameterStep<F>,
+{
+    check_options(options)?;
+    check_start(family, start)?;
+    let sweep =
+        |csmc: &mut ConditionalSmc,
+         model: &F::Model,
+         reference: Option<&[f64]>,
+         out: &mut [f64],
+         rng: &mut Rng| csmc.sample_guided(model, data, reference, out, rng);
+    run_chains(
+        family, prior, step, data, start, options, chains, seed, observer, &sweep,
+    )
+}
+
+/// One conditional SMC sweep (bootstrap or guided).
+type Sweep<'a, M> = dyn Fn(
+        &mut ConditionalSmc,
+        &M,
+        Option<&[f64]>,
+        &mut [f64],
+        &mut Rng,
+    ) -> Result<CsmcSummary, SmcError>
+    + Sync
+    + 'a;
+
+fn check_options(options: &GibbsOptions) -> Result<(), PmcmcError> {
     check_lengths(options.iterations, options.burn_in)?;
     ConditionalSmc::new(options.particles, options.kernel).map_err(|source| {
         PmcmcError::InvalidOption {
@@ -102,7 +161,22 @@ pub fn particle_gibbs<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
             reason: source.to_string(),
         }
     })?;
-    check_start(family, start)?;
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_chains<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
+    family: &F,
+    prior: &P,
+    step: &S,
+    data: &Series,
+    start: &[f64],
+    options: &GibbsOptions,
+    chains: usize,
+    seed: u64,
+    observer: &dyn ChainObserver,
+    sweep: &Sweep<'_, F::Model>,
+) -> Result<Vec<Chain>, PmcmcError> {
     (0..chains)
         .into_par_iter()
         .map(|c| {
@@ -116,6 +190,7 @@ pub fn particle_gibbs<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
                 c,
                 seed,
                 observer,
+                sweep,
             )
         })
         .collect()
@@ -132,6 +207,7 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     chain: usize,
     seed: u64,
     observer: &dyn ChainObserver,
+    sweep: &Sweep<'_, F::Model>,
 ) -> Result<Chain, PmcmcError> {
     let smc_error = |iteration: usize| {
         move |source| PmcmcError::Smc {
@@ -149,8 +225,7 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     let n = sysid_smc::StateSpace::state_dim(&model);
     let steps = data.steps();
     let mut trajectory = vec![0.0; steps * n];
-    csmc.sample(&model, data, None, &mut trajectory, &mut rng)
-        .map_err(smc_error(0))?;
+    sweep(&mut csmc, &model, None, &mut trajectory, &mut rng).map_err(smc_error(0))?;
     let mut previous = trajectory.clone();
     let mut changes = vec![0usize; steps];
     let mut state_sum = vec![0.0; steps * n];
@@ -175,9 +250,14 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
                 reason: format!("the step moved to an inadmissible point: {reason}"),
             })?;
         previous.copy_from_slice(&trajectory);
-        let sweep = csmc
-            .sample(&model, data, Some(&previous), &mut trajectory, &mut rng)
-            .map_err(smc_error(iteration))?;
+        let result = sweep(
+            &mut csmc,
+            &model,
+            Some(&previous),
+            &mut trajectory,
+            &mut rng,
+        )
+        .map_err(smc_error(iteration))?;
         if iteration >= options.burn_in {
             for (t, (new, old)) in trajectory
                 .chunks_exact(n)
@@ -195,7 +275,7 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
         out.push(
             &theta,
             &theta,
-            sweep.loglik,
+            result.loglik,
             prior.log_density(&theta),
             accepted,
         );

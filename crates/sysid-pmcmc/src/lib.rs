@@ -38,7 +38,7 @@ pub use error::PmcmcError;
 pub use family::ModelFamily;
 pub use gibbs::{
     GibbsOptions, MetropolisWithinGibbs, ParameterStep, complete_data_log_likelihood,
-    particle_gibbs,
+    particle_gibbs, particle_gibbs_guided,
 };
 pub use observer::ChainObserver;
 pub use pmmh::{PmmhOptions, pmmh};

@@ -76,7 +76,7 @@
 
 use rand::RngExt;
 
-use crate::model::{FilterModel, TransitionDensity};
+use crate::model::{FilterModel, GuidedProposal, TransitionDensity};
 use crate::resample::multinomial;
 use crate::smoother::AdditiveFunctional;
 use crate::weights::{DrawFailure, draw_from_log_weights, find_cumulative, normalise_log_weights};
@@ -194,15 +194,50 @@ impl ConditionalSmc {
         out: &mut [f64],
         rng: &mut R,
     ) -> Result<CsmcSummary, SmcError> {
-        let expected = data.steps() * model.state_dim();
-        if out.len() != expected {
-            return Err(SmcError::DimensionMismatch {
-                what: "output trajectory",
-                expected: format!("T x n = {} x {} values", data.steps(), model.state_dim()),
-                found: out.len(),
-            });
-        }
-        self.forward(model, data, reference, rng)?;
+        self.check_output(model.state_dim(), data, out)?;
+        self.forward(model, data, reference, &Bootstrap, rng)?;
+        self.finish(model, data, out, rng)?;
+        Ok(CsmcSummary {
+            loglik: self.loglik,
+        })
+    }
+
+    /// As [`sample`](Self::sample), with the locally optimal proposal of
+    /// [`GuidedProposal`] at every fully observed step (free particles resampled with
+    /// weights `W_{t-1}^i p(y_t | x_{t-1}^i)` and drawn from `p(x_t | x_{t-1}, y_t)`,
+    /// all weights then equal; steps with missing outputs stay bootstrap). The
+    /// reference's ancestor is drawn as before, with weights
+    /// `W_{t-1}^i f(x'_t | x_{t-1}^i)`. With informative observations this keeps the free
+    /// particles near the data, so ancestor sampling renews the trajectory at every
+    /// step even with few particles.
+    pub fn sample_guided<M, R>(
+        &mut self,
+        model: &M,
+        data: &Series,
+        reference: Option<&[f64]>,
+        out: &mut [f64],
+        rng: &mut R,
+    ) -> Result<CsmcSummary, SmcError>
+    where
+        M: FilterModel + TransitionDensity + GuidedProposal,
+        R: rand::Rng + ?Sized,
+    {
+        self.check_output(model.state_dim(), data, out)?;
+        self.forward(model, data, reference, &Guided, rng)?;
+        self.finish(model, data, out, rng)?;
+        Ok(CsmcSummary {
+            loglik: self.loglik,
+        })
+    }
+
+    /// Draws the new trajectory from the stored particle system.
+    fn finish<M: TransitionDensity, R: rand::Rng + ?Sized>(
+        &mut self,
+        model: &M,
+        data: &Series,
+        out: &mut [f64],
+        rng: &mut R,
+    ) -> Result<(), SmcError> {
         match self.kernel {
             CsmcKernel::BackwardSimulation => self.backward_simulate(model, data, out, rng)?,
             _ => {
@@ -210,9 +245,7 @@ impl ConditionalSmc {
                 self.trace(k, out);
             }
         }
-        Ok(CsmcSummary {
-            loglik: self.loglik,
-        })
+        Ok(())
     }
 
     /// Adds every traced path of the last sweep's particle system to `functional`,
@@ -254,6 +287,17 @@ impl ConditionalSmc {
         &self.states[start..start + n]
     }
 
+    fn check_output(&self, n: usize, data: &Series, out: &[f64]) -> Result<(), SmcError> {
+        if out.len() != data.steps() * n {
+            return Err(SmcError::DimensionMismatch {
+                what: "output trajectory",
+                expected: format!("T x n = {} x {n} values", data.steps()),
+                found: out.len(),
+            });
+        }
+        Ok(())
+    }
+
     fn check(&self, n: usize, data: &Series, reference: Option<&[f64]>) -> Result<(), SmcError> {
         let expected = data.steps() * n;
         if let Some(r) = reference {
@@ -276,11 +320,12 @@ impl ConditionalSmc {
         Ok(())
     }
 
-    fn forward<M: FilterModel + TransitionDensity, R: rand::Rng + ?Sized>(
+    fn forward<M: FilterModel + TransitionDensity, P: Proposer<M>, R: rand::Rng + ?Sized>(
         &mut self,
         model: &M,
         data: &Series,
         reference: Option<&[f64]>,
+        proposer: &P,
         rng: &mut R,
     ) -> Result<(), SmcError> {
         let n = model.state_dim();
@@ -301,24 +346,54 @@ impl ConditionalSmc {
         for t in 0..steps {
             let (before, rest) = self.states.split_at_mut(t * m * n);
             let current = &mut rest[..m * n];
+            let guided = proposer.guided(data, t);
+            // log p(y_t | y_{0:t-1}) of a guided step
+            let mut predictive = 0.0;
             if t == 0 {
-                model.sample_initials(&mut current[..free * n], rng);
+                if guided {
+                    predictive = proposer.initial(model, data, &mut current[..free * n], rng);
+                } else {
+                    model.sample_initials(&mut current[..free * n], rng);
+                }
                 for (i, a) in self.ancestors[..m].iter_mut().enumerate() {
                     *a = i;
                 }
             } else {
                 let previous = &before[(t - 1) * m * n..];
                 let parents = &mut self.ancestors[t * m..(t + 1) * m];
-                multinomial(&self.weights, rng, &mut parents[..free], &mut self.scratch);
                 let u = data.input(t - 1);
-                model.sample_transitions(
-                    t - 1,
-                    u,
-                    previous,
-                    &parents[..free],
-                    &mut current[..free * n],
-                    rng,
-                );
+                if guided {
+                    // selection weights W_{t-1}^i p(y_t | x_{t-1}^i)
+                    proposer.log_predictive(model, t, previous, data, &mut self.draws);
+                    for (d, &c) in self.draws.iter_mut().zip(&carried) {
+                        *d += c;
+                    }
+                    predictive = normalise_log_weights(&self.draws, &mut self.weights)
+                        .unwrap_or(f64::NEG_INFINITY);
+                    if !predictive.is_finite() {
+                        return Err(weight_failure(&self.draws, predictive, t));
+                    }
+                    multinomial(&self.weights, rng, &mut parents[..free], &mut self.scratch);
+                    proposer.propagate(
+                        model,
+                        t,
+                        previous,
+                        &parents[..free],
+                        data,
+                        &mut current[..free * n],
+                        rng,
+                    );
+                } else {
+                    multinomial(&self.weights, rng, &mut parents[..free], &mut self.scratch);
+                    model.sample_transitions(
+                        t - 1,
+                        u,
+                        previous,
+                        &parents[..free],
+                        &mut current[..free * n],
+                        rng,
+                    );
+                }
                 if let Some(r) = reference {
                     parents[m - 1] = match self.kernel {
                         CsmcKernel::AncestorSampling => {
@@ -346,6 +421,14 @@ impl ConditionalSmc {
                 current[(m - 1) * n..].copy_from_slice(&r[t * n..(t + 1) * n]);
             }
             let log_w = &mut self.log_weights[t * m..(t + 1) * m];
+            if guided {
+                // fully adapted: every particle, the reference included, weighs the same
+                log_w.fill(-(m as f64).ln());
+                self.weights.fill(1.0 / m as f64);
+                loglik += predictive;
+                carried.copy_from_slice(log_w);
+                continue;
+            }
             if data.is_missing(t) {
                 log_w.copy_from_slice(&carried);
             } else {
@@ -465,5 +548,111 @@ fn weight_failure(log_obs: &[f64], increment: f64, t: usize) -> SmcError {
             particle: 0,
             value: increment,
         },
+    }
+}
+
+/// How the free particles of a step are proposed.
+trait Proposer<M> {
+    /// Whether step `t` uses the guided proposal.
+    fn guided(&self, data: &Series, t: usize) -> bool;
+    /// Fills `states` with draws of `p(x_0 | y_0)`; returns `log p(y_0)`.
+    fn initial<R: rand::Rng + ?Sized>(
+        &self,
+        model: &M,
+        data: &Series,
+        states: &mut [f64],
+        rng: &mut R,
+    ) -> f64;
+    /// `out[i] = log p(y_t | x_{t-1}^i)`.
+    fn log_predictive(&self, model: &M, t: usize, previous: &[f64], data: &Series, out: &mut [f64]);
+    /// `next_k ~ p(x_t | x_{t-1}^{parents[k]}, y_t)`.
+    #[allow(clippy::too_many_arguments)]
+    fn propagate<R: rand::Rng + ?Sized>(
+        &self,
+        model: &M,
+        t: usize,
+        previous: &[f64],
+        parents: &[usize],
+        data: &Series,
+        next: &mut [f64],
+        rng: &mut R,
+    );
+}
+
+/// The bootstrap proposal: never guided (the other methods are not called).
+struct Bootstrap;
+
+impl<M> Proposer<M> for Bootstrap {
+    fn guided(&self, _data: &Series, _t: usize) -> bool {
+        false
+    }
+    fn initial<R: rand::Rng + ?Sized>(&self, _: &M, _: &Series, _: &mut [f64], _: &mut R) -> f64 {
+        0.0
+    }
+    fn log_predictive(&self, _: &M, _: usize, _: &[f64], _: &Series, _: &mut [f64]) {}
+    fn propagate<R: rand::Rng + ?Sized>(
+        &self,
+        _: &M,
+        _: usize,
+        _: &[f64],
+        _: &[usize],
+        _: &Series,
+        _: &mut [f64],
+        _: &mut R,
+    ) {
+    }
+}
+
+/// The locally optimal proposal of [`GuidedProposal`] at fully observed steps.
+struct Guided;
+
+impl<M: GuidedProposal> Proposer<M> for Guided {
+    fn guided(&self, data: &Series, t: usize) -> bool {
+        !data.output(t).iter().any(|v| v.is_nan())
+    }
+
+    fn initial<R: rand::Rng + ?Sized>(
+        &self,
+        model: &M,
+        data: &Series,
+        states: &mut [f64],
+        rng: &mut R,
+    ) -> f64 {
+        let (u, y) = (data.input(0), data.output(0));
+        for x in states.chunks_exact_mut(model.state_dim()) {
+            model.sample_initial_guided(u, y, x, rng);
+        }
+        model.log_initial_predictive(u, y)
+    }
+
+    fn log_predictive(
+        &self,
+        model: &M,
+        t: usize,
+        previous: &[f64],
+        data: &Series,
+        out: &mut [f64],
+    ) {
+        let (u, u_next, y) = (data.input(t - 1), data.input(t), data.output(t));
+        for (o, x) in out.iter_mut().zip(previous.chunks_exact(model.state_dim())) {
+            *o = model.log_predictive(t - 1, x, u, u_next, y);
+        }
+    }
+
+    fn propagate<R: rand::Rng + ?Sized>(
+        &self,
+        model: &M,
+        t: usize,
+        previous: &[f64],
+        parents: &[usize],
+        data: &Series,
+        next: &mut [f64],
+        rng: &mut R,
+    ) {
+        let n = model.state_dim();
+        let (u, u_next, y) = (data.input(t - 1), data.input(t), data.output(t));
+        for (x, &p) in next.chunks_exact_mut(n).zip(parents) {
+            model.sample_guided(t - 1, &previous[p * n..(p + 1) * n], u, u_next, y, x, rng);
+        }
     }
 }

@@ -144,3 +144,39 @@ pub trait InitialDensity: StateSpace {
     /// The initial-state log-density of `x`.
     fn log_initial(&self, x: &[f64]) -> f64;
 }
+
+/// The locally optimal ("fully adapted") proposal, for models where it is tractable
+/// (for example linear Gaussian observations): `x_0 ~ p(x_0 | y_0)`,
+/// `x_t ~ p(x_t | x_{t-1}, y_t)`, with the predictive densities `p(y_0)` and
+/// `p(y_t | x_{t-1})`. Samplers that use it propose particles where the data are,
+/// which keeps them alive when an observation is far from the prediction.
+///
+/// Called only for steps whose output is fully observed (`y` has no NaN).
+pub trait GuidedProposal: StateSpace {
+    /// Draws `x_0 ~ p(x_0 | y_0)` into `x`.
+    fn sample_initial_guided<R: rand::Rng + ?Sized>(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        x: &mut [f64],
+        rng: &mut R,
+    );
+    /// `log p(y_0)`.
+    fn log_initial_predictive(&self, u: &[f64], y: &[f64]) -> f64;
+    /// `log p(y_{t+1} | x_t)`: the output one step after `x` (the transition at step `t`
+    /// with input `u`, the output with input `u_next`).
+    fn log_predictive(&self, t: usize, x: &[f64], u: &[f64], u_next: &[f64], y_next: &[f64])
+    -> f64;
+    /// Draws `x_{t+1} ~ p(x_{t+1} | x_t, y_{t+1})` into `next`.
+    #[allow(clippy::too_many_arguments)]
+    fn sample_guided<R: rand::Rng + ?Sized>(
+        &self,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        u_next: &[f64],
+        y_next: &[f64],
+        next: &mut [f64],
+        rng: &mut R,
+    );
+}

@@ -99,7 +99,7 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
 /// What the command runs on.
 enum ChosenModel {
     Nlbench(Nlbench),
-    Linear(LinearGaussianSmc),
+    Linear(Box<LinearGaussianSmc>),
 }
 
 fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
@@ -111,19 +111,20 @@ fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
     };
     match (&a.system, &a.model) {
         (Some(name), _) if name == "nlbench" => Ok(ChosenModel::Nlbench(Nlbench::truth())),
-        (Some(name), _) if name == "lgss" => {
-            Ok(ChosenModel::Linear(adapt(&lgss(), "lgss".into())?))
-        }
+        (Some(name), _) if name == "lgss" => Ok(ChosenModel::Linear(Box::new(adapt(
+            &lgss(),
+            "lgss".into(),
+        )?))),
         (Some(name), _) => Err(CliError::UnknownSystem {
             name: name.clone(),
             known: "nlbench, lgss".into(),
         }),
         (None, Some(path)) => {
             let model = read_model(path)?;
-            Ok(ChosenModel::Linear(adapt(
+            Ok(ChosenModel::Linear(Box::new(adapt(
                 &model,
                 path.display().to_string(),
-            )?))
+            )?)))
         }
         (None, None) => Err(CliError::BadOption {
             option: "--system",
@@ -185,7 +186,7 @@ pub fn run_filter(a: &ParticleArgs) -> Result<(), CliError> {
         ChosenModel::Nlbench(m) => filter_with(a, &m, 1, 0),
         ChosenModel::Linear(m) => {
             let (p, inputs) = (m.output_dim(), m.input_dim());
-            filter_with(a, &m, p, inputs)
+            filter_with(a, m.as_ref(), p, inputs)
         }
     }
 }
@@ -240,7 +241,7 @@ pub fn run_smoother(a: &SmoothArgs) -> Result<(), CliError> {
         ChosenModel::Nlbench(m) => smooth_with(a, &m, 1, 0),
         ChosenModel::Linear(m) => {
             let (p, inputs) = (m.output_dim(), m.input_dim());
-            smooth_with(a, &m, p, inputs)
+            smooth_with(a, m.as_ref(), p, inputs)
         }
     }
 }

@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use sysid::models::{LgssConjugate, LgssFamily, NlbenchFamily};
 use sysid::pmcmc::{
     Chain, CsmcKernel, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily,
-    PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, pmmh, summarise,
+    PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
 };
 use sysid::smc::Resampling;
 
@@ -102,6 +102,34 @@ pub struct PgasArgs {
     /// Metropolis-within-Gibbs: proposal standard deviations (unconstrained scale).
     #[arg(long, value_delimiter = ',')]
     pub proposal_sd: Option<Vec<f64>>,
+    /// Propose the states with the locally optimal proposal (lgss only): renews the
+    /// whole trajectory even where the data jump, with few particles.
+    #[arg(long)]
+    pub guided: bool,
+}
+
+/// A particle Gibbs sampler: `particle_gibbs` or `particle_gibbs_guided`.
+type GibbsRunner<F, S> = fn(
+    &F,
+    &IndependentPrior,
+    &S,
+    &sysid::smc::Series,
+    &[f64],
+    &GibbsOptions,
+    usize,
+    u64,
+    &dyn sysid::pmcmc::ChainObserver,
+) -> Result<Vec<Chain>, PmcmcError>;
+
+/// The sampler for lgss: guided on request.
+fn lgss_runner<S: sysid::pmcmc::ParameterStep<LgssFamily>>(
+    guided: bool,
+) -> GibbsRunner<LgssFamily, S> {
+    if guided {
+        particle_gibbs_guided::<LgssFamily, IndependentPrior, S>
+    } else {
+        particle_gibbs::<LgssFamily, IndependentPrior, S>
+    }
 }
 
 fn bad(option: &'static str, message: impl Into<String>) -> CliError {
@@ -333,13 +361,23 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
             let prior = priors(c, &family.parameter_names())?;
             let conjugate = LgssConjugate::from_priors(prior.priors())
                 .map_err(|e| bad("--step", format!("{e} (or use --step mh)")))?;
-            pgas_with(a, &family, &prior, &conjugate, kernel, vec![0.5, 1.0, 1.0])
+            let run = lgss_runner(a.guided);
+            pgas_with(
+                a,
+                &family,
+                &prior,
+                &conjugate,
+                kernel,
+                vec![0.5, 1.0, 1.0],
+                run,
+            )
         }
         ("lgss", "mh") => {
             let family = LgssFamily::default();
             let prior = priors(c, &family.parameter_names())?;
             let step = mh_step(a, &prior, family.dim())?;
-            pgas_with(a, &family, &prior, &step, kernel, vec![0.5, 1.0, 1.0])
+            let run = lgss_runner(a.guided);
+            pgas_with(a, &family, &prior, &step, kernel, vec![0.5, 1.0, 1.0], run)
         }
         ("nlbench", "mh") => {
             let family = NlbenchFamily {
@@ -347,8 +385,15 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
                 ..NlbenchFamily::default()
             };
             let prior = priors(c, &family.parameter_names())?;
+            if a.guided {
+                return Err(bad(
+                    "--guided",
+                    "nlbench has no tractable locally optimal proposal (its output is nonlinear in the state); use the bootstrap kernel",
+                ));
+            }
             let step = mh_step(a, &prior, family.dim())?;
-            pgas_with(a, &family, &prior, &step, kernel, family.truth())
+            let run = particle_gibbs::<NlbenchFamily, IndependentPrior, _>;
+            pgas_with(a, &family, &prior, &step, kernel, family.truth(), run)
         }
         ("lgss" | "nlbench", other) => Err(bad(
             "--step",
@@ -390,6 +435,7 @@ fn pgas_with<F, S>(
     step: &S,
     kernel: CsmcKernel,
     default_start: Vec<f64>,
+    run: GibbsRunner<F, S>,
 ) -> Result<(), CliError>
 where
     F: ModelFamily,
@@ -412,7 +458,7 @@ where
     let started = std::time::Instant::now();
     let chains = super::particle::pool(c.threads)?
         .install(|| {
-            particle_gibbs(
+            run(
                 family,
                 prior,
                 step,

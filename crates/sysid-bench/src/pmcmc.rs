@@ -2,7 +2,8 @@
 //!
 //! - `pmmh_iteration`: one PMMH iteration on `nlbench` (M = 100, T = 1000), one thread:
 //!   the median over repetitions of (time of a 100-iteration chain) / 100;
-//! - `pgas_iteration`: one particle-Gibbs iteration (ancestor sampling, M = 10, T = 1000)
+//! - `pgas_iteration`, `pgas_guided_iteration`: one particle-Gibbs iteration (ancestor
+//!   sampling, bootstrap or guided proposal, M = 10, T = 1000)
 //!   on `lgss` with the conjugate step;
 //! - `pmmh_chains_throughput`: 2 chains on 1 and on 2 threads (the speed-up);
 //! - `pmcmc_lgss_posterior`: PMMH and PGAS posterior means and sds of (phi, q, r) on an
@@ -15,7 +16,7 @@ use std::time::Instant;
 use sysid::models::{LgssConjugate, LgssFamily, Nlbench, NlbenchFamily, System};
 use sysid::pmcmc::{
     CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior,
-    effective_sample_size, particle_gibbs, pmmh, summarise,
+    effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
 };
 use sysid::smc::Series;
 
@@ -102,26 +103,33 @@ pub fn run(reps: usize) {
         particles: 10,
         kernel: CsmcKernel::AncestorSampling,
     };
-    let ms = ms_per_iteration(reps, iterations, |r| {
-        one.install(|| {
-            particle_gibbs(
-                &LgssFamily::default(),
-                &lgss_prior(),
-                &conjugate(),
-                &lg_series,
-                &[0.5, 1.0, 1.0],
-                &gibbs,
-                1,
-                r,
-                &(),
-            )
-        })
-        .expect("runs");
-    });
-    emit(
-        &json!({"task": "pgas_iteration", "params": {"system": "lgss", "T": 1000, "M": 10, "threads": 1},
-        "ms_median": ms}),
-    );
+    for (guided, task) in [(false, "pgas_iteration"), (true, "pgas_guided_iteration")] {
+        let run = if guided {
+            particle_gibbs_guided
+        } else {
+            particle_gibbs
+        };
+        let ms = ms_per_iteration(reps, iterations, |r| {
+            one.install(|| {
+                run(
+                    &LgssFamily::default(),
+                    &lgss_prior(),
+                    &conjugate(),
+                    &lg_series,
+                    &[0.5, 1.0, 1.0],
+                    &gibbs,
+                    1,
+                    r,
+                    &(),
+                )
+            })
+            .expect("runs");
+        });
+        emit(
+            &json!({"task": task, "params": {"system": "lgss", "T": 1000, "M": 10, "threads": 1},
+            "ms_median": ms}),
+        );
+    }
 
     // throughput of 2 chains on 1 and 2 threads
     let chains_seconds = |threads: usize| {

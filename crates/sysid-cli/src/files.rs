@@ -30,6 +30,23 @@ pub fn create_output(path: &Path, force: bool) -> Result<BufWriter<File>, CliErr
     })
 }
 
+/// Refuses, before any work, outputs that exist when `force` is not given (the final
+/// write checks again, atomically, through [`create_output`]).
+pub fn refuse_existing<'a>(
+    paths: impl IntoIterator<Item = &'a Path>,
+    force: bool,
+) -> Result<(), CliError> {
+    if force {
+        return Ok(());
+    }
+    match paths.into_iter().find(|p| p.exists()) {
+        Some(path) => Err(CliError::WouldOverwrite {
+            path: path.to_path_buf(),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// Writes `contents` through [`create_output`].
 pub fn write_output(path: &Path, force: bool, contents: &str) -> Result<(), CliError> {
     let mut w = create_output(path, force)?;

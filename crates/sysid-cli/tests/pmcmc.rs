@@ -127,6 +127,35 @@ fn pmmh_runs_and_reports_acceptance_and_diagnostics() {
         "--json",
     ]));
     assert_eq!(summary["acceptance"].as_array().unwrap().len(), 2);
+    // JSON draws, and no overwrite without --force (refused before running)
+    let out = dir.join("chains.json");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "pmmh",
+            "--system",
+            "lgss",
+            "--data",
+            s(&data),
+            "--iters",
+            "50",
+            "--chains",
+            "2",
+            "--particles",
+            "20",
+            "--out",
+            s(&out),
+        ];
+        args.extend(extra);
+        sysid(&args)
+    };
+    assert!(run(&[]).status.success());
+    let chains: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let first = &chains["chains"][0];
+    assert_eq!(first["samples"].as_array().unwrap().len(), 50 * 3);
+    assert_eq!(first["names"][0], "phi");
+    assert_one_line_error(&run(&[]), &["chains.json", "--force"]);
+    assert!(run(&["--force"]).status.success());
     for p in summary["summary"].as_array().unwrap() {
         assert!(p["ess"].as_f64().unwrap() > 1.0 && p["rhat"].as_f64().unwrap().is_finite());
     }

@@ -72,6 +72,27 @@ fn fit_wiener_refuses_bad_input() {
         &["--particles"],
     );
     assert!(!out.exists());
+    // an existing output is refused before the (long) fit, not after it
+    std::fs::write(&out, "keep").unwrap();
+    let started = std::time::Instant::now();
+    assert_one_line_error(
+        &sysid(&[
+            "fit",
+            "wiener",
+            "--data",
+            s(&wiener),
+            "--iters",
+            "1000",
+            "--out",
+            s(&out),
+        ]),
+        &["w.json", "--force"],
+    );
+    assert!(
+        started.elapsed().as_secs() < 5,
+        "the refusal came after the fit"
+    );
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "keep");
     assert_one_line_error(
         &sysid(&[
             "simulate",

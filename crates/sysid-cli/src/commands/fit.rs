@@ -127,6 +127,11 @@ fn initial_model(
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    // refuse before a long fit, not after it
+    crate::files::refuse_existing(
+        std::iter::once(o.out.as_path()).chain(o.trace.as_deref()),
+        o.force,
+    )?;
     match o.kind.to_ascii_lowercase().as_str() {
         "lti" => {}
         "nlbench" => return super::fit_affine::run(o, true),

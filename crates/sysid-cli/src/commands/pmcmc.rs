@@ -60,8 +60,8 @@ pub struct ChainArgs {
     /// Worker threads (the chains are identical for any number).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// Write every draw as CSV (chain, iteration, burn_in, parameters, loglik,
-    /// log_prior, accepted).
+    /// Write every draw: CSV (chain, iteration, burn_in, parameters, loglik, log_prior,
+    /// accepted), or JSON (one object per chain) when the name ends in `.json`.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Replace an existing output file.
@@ -208,6 +208,8 @@ fn priors(a: &ChainArgs, names: &[String]) -> Result<IndependentPrior, CliError>
 }
 
 fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
+    // refuse before a long run, not after it
+    crate::files::refuse_existing(a.out.as_deref(), a.force)?;
     if a.chains == 0 {
         return Err(bad("--chains", "must be at least 1"));
     }
@@ -543,6 +545,14 @@ fn finish(
 }
 
 fn write_chains(path: &std::path::Path, force: bool, chains: &[Chain]) -> Result<(), CliError> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
+        let text = serde_json::to_string(&serde_json::json!({ "chains": chains }))
+            .expect("chains serialise");
+        return crate::files::write_output(path, force, &(text + "\n"));
+    }
     let mut w = create_output(path, force)?;
     let io = |source| CliError::Io {
         path: path.to_path_buf(),

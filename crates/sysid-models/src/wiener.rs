@@ -247,6 +247,9 @@ pub struct Unpacked {
     transition_norm: f64,
     /// `-0.5 ln(2 pi r_i)`
     observation_norm: [f64; 2],
+    inv_l11: f64,
+    inv_l22: f64,
+    inv_r: [f64; 2],
 }
 
 impl Unpacked {
@@ -262,6 +265,9 @@ impl Unpacked {
             beta: [theta[7], theta[7] + gap_sat, theta[9], theta[9] + gap_dead],
             r: [theta[11].exp(), theta[12].exp()],
             transition_norm: -LN_2PI - theta[4] - theta[6],
+            inv_l11: (-theta[4]).exp(),
+            inv_l22: (-theta[6]).exp(),
+            inv_r: [(-theta[11]).exp(), (-theta[12]).exp()],
             observation_norm: [-0.5 * (LN_2PI + theta[11]), -0.5 * (LN_2PI + theta[12])],
         }
     }
@@ -272,8 +278,8 @@ impl Unpacked {
         let a = &self.a;
         let e0 = next[0] - (a[0][0] * x[0] + a[0][1] * x[1]);
         let e1 = next[1] - (a[1][0] * x[0] + a[1][1] * x[1]);
-        let w0 = e0 / self.l11;
-        let w1 = (e1 - self.l21 * w0) / self.l22;
+        let w0 = e0 * self.inv_l11;
+        let w1 = (e1 - self.l21 * w0) * self.inv_l22;
         let value = self.transition_norm - 0.5 * (w0 * w0 + w1 * w1);
         ([w0, w1], value)
     }
@@ -291,7 +297,7 @@ impl Unpacked {
         for i in 0..2 {
             if !y[i].is_nan() {
                 let e = y[i] - h[i];
-                total += self.observation_norm[i] - 0.5 * e * e / self.r[i];
+                total += self.observation_norm[i] - 0.5 * e * e * self.inv_r[i];
             }
         }
         total
@@ -372,14 +378,14 @@ impl GradientModel for WienerModel {
     ) -> f64 {
         let ([w0, w1], value) = p.transition(x, next);
         // Q^{-1} e = L^{-T} w
-        let v1 = w1 / p.l22;
-        let v0 = (w0 - p.l21 * v1) / p.l11;
+        let v1 = w1 * p.inv_l22;
+        let v0 = (w0 - p.l21 * v1) * p.inv_l11;
         grad[0] += v0 * x[0];
         grad[1] += v0 * x[1];
         grad[2] += v1 * x[0];
         grad[3] += v1 * x[1];
-        grad[4] += -1.0 + w0 * w0 - w0 * w1 * p.l21 / p.l22;
-        grad[5] += w0 * w1 / p.l22;
+        grad[4] += -1.0 + w0 * w0 - w0 * w1 * p.l21 * p.inv_l22;
+        grad[5] += w0 * w1 * p.inv_l22;
         grad[6] += -1.0 + w1 * w1;
         value
     }
@@ -399,7 +405,7 @@ impl GradientModel for WienerModel {
         let b = p.beta;
         if !y[0].is_nan() {
             let e = y[0] - h[0];
-            let dh = e / p.r[0]; // d log g / d h1
+            let dh = e * p.inv_r[0]; // d log g / d h1
             // h1 = beta1 below, beta2 = beta1 + gap above
             if z < b[0] {
                 grad[7] += dh;
@@ -407,11 +413,11 @@ impl GradientModel for WienerModel {
                 grad[7] += dh;
                 grad[8] += dh * p.gap_sat;
             }
-            grad[11] += -0.5 + 0.5 * e * e / p.r[0];
+            grad[11] += -0.5 + 0.5 * e * e * p.inv_r[0];
         }
         if !y[1].is_nan() {
             let e = y[1] - h[1];
-            let dh = e / p.r[1];
+            let dh = e * p.inv_r[1];
             // h2 = z - beta3 below, z - beta4 = z - beta3 - gap above
             if z < b[2] {
                 grad[9] -= dh;
@@ -419,7 +425,7 @@ impl GradientModel for WienerModel {
                 grad[9] -= dh;
                 grad[10] -= dh * p.gap_dead;
             }
-            grad[12] += -0.5 + 0.5 * e * e / p.r[1];
+            grad[12] += -0.5 + 0.5 * e * e * p.inv_r[1];
         }
         p.observation(z, y)
     }

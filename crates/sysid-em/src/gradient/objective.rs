@@ -53,43 +53,62 @@ fn sum_terms<G: GradientModel>(
     theta: &[f64],
     paths: &Trajectories,
     data: &Series,
-    mut grad: Option<&mut [f64]>,
+    grad: Option<&mut [f64]>,
 ) -> f64 {
     let p = model.unpack(theta);
-    let (k, steps) = (paths.paths(), paths.steps());
-    if let Some(g) = grad.as_deref_mut() {
-        g.fill(0.0);
-    }
-    let mut total = 0.0;
-    for j in 0..k {
-        let x = paths.state(0, j);
-        total += match grad.as_deref_mut() {
-            Some(g) => model.log_initial_gradient(&p, x, g),
-            None => model.log_initial(&p, x),
-        };
-    }
-    for t in 0..steps {
-        let (u, observed) = (data.input(t), !data.is_missing(t));
-        let y = data.output(t);
-        for j in 0..k {
-            let x = paths.state(t, j);
-            if t + 1 < steps {
-                let next = paths.state(t + 1, j);
-                total += match grad.as_deref_mut() {
-                    Some(g) => model.log_transition_gradient(&p, t, x, u, next, g),
-                    None => model.log_transition(&p, t, x, u, next),
-                };
+    let (k, steps, n) = (paths.paths(), paths.steps(), paths.state_dim());
+    let total = match grad {
+        None => {
+            let mut total: f64 = paths
+                .states(0)
+                .chunks_exact(n)
+                .map(|x| model.log_initial(&p, x))
+                .sum();
+            for t in 0..steps {
+                let (u, y) = (data.input(t), data.output(t));
+                let states = paths.states(t);
+                if t + 1 < steps {
+                    for (x, next) in states
+                        .chunks_exact(n)
+                        .zip(paths.states(t + 1).chunks_exact(n))
+                    {
+                        total += model.log_transition(&p, t, x, u, next);
+                    }
+                }
+                if !data.is_missing(t) {
+                    for x in states.chunks_exact(n) {
+                        total += model.log_observation(&p, t, x, u, y);
+                    }
+                }
             }
-            if observed {
-                total += match grad.as_deref_mut() {
-                    Some(g) => model.log_observation_gradient(&p, t, x, u, y, g),
-                    None => model.log_observation(&p, t, x, u, y),
-                };
-            }
+            total
         }
-    }
-    if let Some(g) = grad {
-        g.iter_mut().for_each(|v| *v /= k as f64);
-    }
+        Some(grad) => {
+            grad.fill(0.0);
+            let mut total = 0.0;
+            for x in paths.states(0).chunks_exact(n) {
+                total += model.log_initial_gradient(&p, x, grad);
+            }
+            for t in 0..steps {
+                let (u, y) = (data.input(t), data.output(t));
+                let states = paths.states(t);
+                if t + 1 < steps {
+                    for (x, next) in states
+                        .chunks_exact(n)
+                        .zip(paths.states(t + 1).chunks_exact(n))
+                    {
+                        total += model.log_transition_gradient(&p, t, x, u, next, grad);
+                    }
+                }
+                if !data.is_missing(t) {
+                    for x in states.chunks_exact(n) {
+                        total += model.log_observation_gradient(&p, t, x, u, y, grad);
+                    }
+                }
+            }
+            grad.iter_mut().for_each(|v| *v /= k as f64);
+            total
+        }
+    };
     total / k as f64
 }

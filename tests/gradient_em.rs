@@ -145,7 +145,15 @@ fn bfgs_m_step_reaches_the_closed_form_maximiser_and_never_lowers_q() {
     }
     let exact = [phi, sq / count, sr / (20.0 * 200.0)];
     for start in [[0.0, 0.0, 0.0], [0.9, -1.0, 1.0], [-0.5, 2.0, -2.0]] {
-        let out = m_step(&model, &paths, &data, &start, &MStepOptions::default()).unwrap();
+        let out = m_step(
+            &model,
+            &paths,
+            &data,
+            &start,
+            &MStepOptions::default(),
+            None,
+        )
+        .unwrap();
         let fit = model.constrained(&out.theta);
         assert!(out.q_after >= out.q_before, "{out:?}");
         assert!(
@@ -162,7 +170,7 @@ fn bfgs_m_step_reaches_the_closed_form_maximiser_and_never_lowers_q() {
     }
     // at the maximiser itself the step keeps (or very slightly improves) the value
     let at = [exact[0], exact[1].ln(), exact[2].ln()];
-    let out = m_step(&model, &paths, &data, &at, &MStepOptions::default()).unwrap();
+    let out = m_step(&model, &paths, &data, &at, &MStepOptions::default(), None).unwrap();
     assert!(out.q_after >= out.q_before);
 }
 

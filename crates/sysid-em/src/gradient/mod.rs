@@ -13,8 +13,9 @@
 //!    They stay fixed for the whole M-step, so `Q^` is a deterministic function.
 //! 2. **M-step.** Maximise `Q^(theta) = I1 + I2 + I3` ([`q_hat`]) by BFGS with the
 //!    More-Thuente line search (argmin), from `theta_k` ([`m_step`]); the value and
-//!    gradient are computed in one pass and cached. `Q^` never decreases within an
-//!    M-step.
+//!    gradient are computed in one pass and cached, and BFGS starts from the previous
+//!    M-step's inverse-Hessian estimate (the identity at first). `Q^` never decreases
+//!    within an M-step.
 //!
 //! A closed-form sub-step for a linear Gaussian part (as in affine EM) is not used:
 //! the blind Wiener model's linear part and nonlinearity share the state, and one BFGS
@@ -137,7 +138,8 @@ impl<G: GradientModel, S: Smoother<G::Smc>> EmAlgorithm for GradientEm<'_, G, S>
             &self.data,
             sub_seed(self.seed, 2 * k + 1),
         )?;
-        let outcome = m_step(self.model, &paths, &self.data, current, &self.options)?;
+        let warm = self.last.as_mut().and_then(|m| m.inverse_hessian.take());
+        let outcome = m_step(self.model, &paths, &self.data, current, &self.options, warm)?;
         let next = outcome.theta.clone();
         self.last = Some(outcome);
         Ok((next, run.loglik))

@@ -40,6 +40,9 @@ pub struct MStepOutcome {
     pub evaluations: usize,
     /// Why BFGS stopped (argmin's termination status, or its error).
     pub status: String,
+    /// BFGS's final inverse-Hessian estimate (row-major rows), to warm-start the next
+    /// M-step; `None` when BFGS failed.
+    pub inverse_hessian: Option<Vec<Vec<f64>>>,
 }
 
 /// One evaluation of the cost: the point, `-Q^ / T` and its gradient.
@@ -112,7 +115,8 @@ impl<G: GradientModel> Gradient for NegativeQ<'_, G> {
 
 /// Maximises `Q^` over `theta` from `start` by BFGS with the More-Thuente line search
 /// (argmin 0.11), on `-Q^ / T` (per-step scale, so that the identity is a sensible
-/// first inverse Hessian).
+/// first inverse Hessian). `inverse_hessian` warm-starts BFGS (the previous M-step's
+/// final estimate: consecutive `Q^` differ little); `None` starts from the identity.
 ///
 /// The result never has a smaller `Q^` than `start`: if BFGS fails (a non-finite
 /// value at a trial point) or ends lower, the best point it visited is kept, or
@@ -123,6 +127,7 @@ pub fn m_step<G: GradientModel>(
     data: &Series,
     start: &[f64],
     options: &MStepOptions,
+    inverse_hessian: Option<Vec<Vec<f64>>>,
 ) -> Result<MStepOutcome, GradientEmError> {
     let d = start.len();
     let q_before = q_hat(model, start, paths, data, None)?;
@@ -143,18 +148,25 @@ pub fn m_step<G: GradientModel>(
     let solver = BFGS::new(linesearch)
         .with_tolerance_grad(options.tol_grad)
         .map_err(|e| GradientEmError::InvalidOption(e.to_string()))?;
-    let identity: Vec<Vec<f64>> = (0..d)
-        .map(|i| (0..d).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
-        .collect();
+    let usable = |h: &Vec<Vec<f64>>| {
+        h.len() == d
+            && h.iter()
+                .all(|row| row.len() == d && row.iter().all(|v| v.is_finite()))
+    };
+    let first_inverse = inverse_hessian.filter(usable).unwrap_or_else(|| {
+        (0..d)
+            .map(|i| (0..d).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+            .collect()
+    });
     let result = Executor::new(problem, solver)
         .configure(|state| {
             state
                 .param(start.to_vec())
-                .inv_hessian(identity)
+                .inv_hessian(first_inverse)
                 .max_iters(options.max_iterations)
         })
         .run();
-    let (candidate, status, evaluations) = match result {
+    let (candidate, status, evaluations, final_inverse) = match result {
         Ok(mut r) => {
             let status = r.state.get_termination_status().to_string();
             let evaluations = r
@@ -162,9 +174,10 @@ pub fn m_step<G: GradientModel>(
                 .problem
                 .as_ref()
                 .map_or(0, |p| *p.evaluations.borrow());
-            (r.state.take_best_param(), status, evaluations)
+            let inverse = r.state.take_inv_hessian();
+            (r.state.take_best_param(), status, evaluations, inverse)
         }
-        Err(e) => (None, format!("error: {e}"), 0),
+        Err(e) => (None, format!("error: {e}"), 0, None),
     };
     let mut outcome = MStepOutcome {
         theta: start.to_vec(),
@@ -172,6 +185,7 @@ pub fn m_step<G: GradientModel>(
         q_after: q_before,
         evaluations,
         status,
+        inverse_hessian: final_inverse,
     };
     if let Some(theta) = candidate {
         let q = q_hat(model, &theta, paths, data, None)?;

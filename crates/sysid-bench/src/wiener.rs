@@ -93,6 +93,20 @@ fn realisation(a: &Args, run: usize) -> Result<Outcome, String> {
     })
 }
 
+/// A number for JSON: non-finite values (a breakpoint that ran off to infinity) as the
+/// strings "inf", "-inf" or "NaN" instead of serde's silent null.
+fn number(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        json!(v.to_string())
+    }
+}
+
+fn numbers(values: &[f64]) -> Vec<serde_json::Value> {
+    values.iter().map(|&v| number(v)).collect()
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     crate::summary(&mut v).0
 }
@@ -146,8 +160,10 @@ pub fn run(a: &Args) -> Result<(), String> {
         seconds.push(o.seconds);
         emit(
             &json!({"task": "wiener_run", "params": {"run": o.run, "T": a.steps, "M": a.particles, "iterations": a.iters},
-            "beta": e.beta, "beta_abs_error": errors, "r": e.r, "a": e.a, "q": e.q,
-            "magnitude_error_start": o.start_error, "magnitude_error": magnitude,
+            "beta": numbers(&e.beta), "beta_abs_error": numbers(&errors), "r": numbers(&e.r),
+            "a": e.a.iter().map(|row| numbers(row)).collect::<Vec<_>>(),
+            "q": e.q.iter().map(|row| numbers(row)).collect::<Vec<_>>(),
+            "magnitude_error_start": number(o.start_error), "magnitude_error": number(magnitude),
             "loglik_estimate": o.loglik, "seconds": o.seconds}),
         );
     }
@@ -159,10 +175,10 @@ pub fn run(a: &Args) -> Result<(), String> {
     emit(
         &json!({"task": "wiener_summary", "params": {"runs": a.runs, "T": a.steps, "M": a.particles,
             "iterations": a.iters, "bfgs_iters": a.bfgs_iters, "seed": a.seed},
-        "breakpoint_median_abs_error_relative": relative,
+        "breakpoint_median_abs_error_relative": numbers(&relative),
         "breakpoints_met": relative.iter().all(|&r| r <= 0.1),
-        "r_median_max_abs_error": median(r_errors),
-        "magnitude_error_median": median(magnitude_errors.clone()),
+        "r_median_max_abs_error": number(median(r_errors)),
+        "magnitude_error_median": number(median(magnitude_errors.clone())),
         "magnitude_met": median(magnitude_errors) <= 0.1,
         "seconds_per_realisation_median": median(seconds)}),
     );

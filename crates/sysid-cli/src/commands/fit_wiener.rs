@@ -97,9 +97,24 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         });
     }
     let e = WienerEstimate::from_theta(&result.estimate);
+    // a breakpoint can run off to infinity (no data beyond it): written as "inf", not
+    // as serde's silent null
+    let numbers = |values: &[f64]| -> Vec<serde_json::Value> {
+        values
+            .iter()
+            .map(|&v| {
+                if v.is_finite() {
+                    serde_json::json!(v)
+                } else {
+                    serde_json::json!(v.to_string())
+                }
+            })
+            .collect()
+    };
     let json = serde_json::json!({
-        "system": "wiener", "a": e.a, "c": [1.0, 0.0], "q": e.q, "breakpoints": e.beta,
-        "r": e.r,
+        "system": "wiener", "a": e.a.map(|row| numbers(&row)), "c": [1.0, 0.0],
+        "q": e.q.map(|row| numbers(&row)), "breakpoints": numbers(&e.beta),
+        "r": numbers(&e.r),
         "gradient_em": {"iterations": result.iterations, "particles": o.particles,
             "seed": o.seed, "loglik_estimate": result.loglik,
             "normalised_magnitude_error_vs_reference_system": normalised_magnitude_error(&e)},
@@ -122,7 +137,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         o.json,
         serde_json::json!({
             "command": "fit", "system": "wiener", "iterations": result.iterations,
-            "breakpoints": e.beta, "r": e.r, "loglik_estimate": result.loglik,
+            "breakpoints": numbers(&e.beta), "r": numbers(&e.r), "loglik_estimate": result.loglik,
             "seconds": result.elapsed.as_secs_f64(), "out": o.out,
         }),
         || {

@@ -39,6 +39,10 @@ pub mod prelude {
         SufficientStatistics,
     };
     pub use crate::models::{LinearGaussianSmc, Nlbench, NlbenchParams, System};
+    pub use crate::pmcmc::{
+        Chain, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior,
+        particle_gibbs, pmmh, summarise,
+    };
     pub use crate::smc::{
         FilterOptions, ParticleFilter, Resampling, Series, SmcError, Smoother, Trajectories,
     };

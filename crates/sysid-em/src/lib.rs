@@ -9,6 +9,7 @@
 pub mod affine;
 pub mod gradient;
 pub mod linear;
+mod particle_pass;
 mod regression;
 pub mod runner;
 
@@ -16,10 +17,3 @@ pub use runner::{
     EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError, Termination,
     relative_change, run_em,
 };
-
-/// A seed for piece `k` of the work seeded by `seed` (the particle E-steps' filter and
-/// smoother streams).
-pub(crate) fn sub_seed(seed: u64, k: u64) -> u64 {
-    use rand::RngExt;
-    sysid_smc::stream(seed, k).random()
-}

@@ -295,6 +295,21 @@ impl LinearGaussianSmc {
         guide.log_norm_s - 0.5 * Self::whitened_norm2(&guide.s_lower, p, e)
     }
 
+    /// The guided step from `x`: writes the mean of `p(x_{t+1} | x, y_next)` into `out`
+    /// and returns `log p(y_next | x)`.
+    fn guided_step(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        u_next: &[f64],
+        y_next: &[f64],
+        out: &mut [f64],
+    ) -> f64 {
+        let mut mean = [0.0; MAX_DIM];
+        self.transition_mean(x, u, &mut mean[..self.n]);
+        self.guided_update(&self.guide_step, &mean[..self.n], u_next, y_next, out)
+    }
+
     /// `mean + F z` with `z ~ N(0, I)`.
     fn add_noise<R: Rng + ?Sized>(guide: &Guide, n: usize, x: &mut [f64], rng: &mut R) {
         let mut z = [0.0; MAX_DIM];
@@ -332,16 +347,8 @@ impl GuidedProposal for LinearGaussianSmc {
         u_next: &[f64],
         y_next: &[f64],
     ) -> f64 {
-        let mut mean = [0.0; MAX_DIM];
         let mut out = [0.0; MAX_DIM];
-        self.transition_mean(x, u, &mut mean[..self.n]);
-        self.guided_update(
-            &self.guide_step,
-            &mean[..self.n],
-            u_next,
-            y_next,
-            &mut out[..self.n],
-        )
+        self.guided_step(x, u, u_next, y_next, &mut out[..self.n])
     }
 
     fn sample_guided<R: Rng + ?Sized>(
@@ -354,9 +361,7 @@ impl GuidedProposal for LinearGaussianSmc {
         next: &mut [f64],
         rng: &mut R,
     ) {
-        let mut mean = [0.0; MAX_DIM];
-        self.transition_mean(x, u, &mut mean[..self.n]);
-        self.guided_update(&self.guide_step, &mean[..self.n], u_next, y_next, next);
+        self.guided_step(x, u, u_next, y_next, next);
         Self::add_noise(&self.guide_step, self.n, next, rng);
     }
 }

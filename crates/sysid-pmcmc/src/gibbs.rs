@@ -272,13 +272,7 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
                 *s += x;
             }
         }
-        out.push(
-            &theta,
-            &theta,
-            result.loglik,
-            prior.log_density(&theta),
-            accepted,
-        );
+        out.push(&theta, result.loglik, prior.log_density(&theta), accepted);
         observer.iteration(chain, iteration);
     }
     let kept = (options.iterations - options.burn_in) as f64;

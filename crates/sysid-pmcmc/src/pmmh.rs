@@ -251,11 +251,13 @@ fn run_chain<F: ModelFamily, P: Prior>(
     );
     let mut candidate = current.clone();
     let mut noise = vec![0.0; d];
+    // the unconstrained draws, for adapting the proposal's shape during burn-in
+    let mut visited = Vec::with_capacity(options.burn_in * d);
     let mut moves = 0usize;
     for iteration in 0..options.iterations {
         let adapting = options.adapt && iteration < options.burn_in;
         if adapting && moves >= 2 * d {
-            proposal.adapt_shape(iteration, &out.unconstrained);
+            proposal.adapt_shape(iteration, &visited);
         }
         for e in noise.iter_mut() {
             *e = StandardNormal.sample(&mut rng);
@@ -294,11 +296,13 @@ fn run_chain<F: ModelFamily, P: Prior>(
         }
         out.push(
             &current.theta,
-            &current.z,
             current.log_likelihood,
             current.log_prior,
             accepted,
         );
+        if adapting {
+            visited.extend_from_slice(&current.z);
+        }
         observer.iteration(chain, iteration);
     }
     Ok(out.finish())
@@ -364,7 +368,6 @@ impl Proposal {
 /// Collects the draws of a chain.
 pub(crate) struct ChainRecorder {
     chain: Chain,
-    pub(crate) unconstrained: Vec<f64>,
 }
 
 impl ChainRecorder {
@@ -381,20 +384,17 @@ impl ChainRecorder {
                 state_update_rate: None,
                 state_mean: None,
             },
-            unconstrained: Vec::with_capacity(iterations * d),
         }
     }
 
     pub(crate) fn push(
         &mut self,
         theta: &[f64],
-        z: &[f64],
         log_likelihood: f64,
         log_prior: f64,
         accepted: bool,
     ) {
         self.chain.samples.extend_from_slice(theta);
-        self.unconstrained.extend_from_slice(z);
         self.chain.log_likelihood.push(log_likelihood);
         self.chain.log_prior.push(log_prior);
         self.chain.accepted.push(accepted);

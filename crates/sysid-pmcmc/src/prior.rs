@@ -21,7 +21,7 @@
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{Beta, Continuous, Gamma, InverseGamma, LogNormal, Normal, Uniform};
 
-use crate::PmcmcError;
+use crate::{PmcmcError, Support};
 
 /// A prior on the whole parameter vector.
 pub trait Prior: Sync {
@@ -108,50 +108,40 @@ impl ScalarPrior {
         result.map_err(bad)
     }
 
+    /// Where the density is positive.
+    pub fn support(&self) -> Support {
+        match *self {
+            ScalarPrior::Normal { .. } | ScalarPrior::Flat => Support::Real,
+            ScalarPrior::LogNormal { .. }
+            | ScalarPrior::Gamma { .. }
+            | ScalarPrior::InverseGamma { .. } => Support::Positive,
+            ScalarPrior::Uniform { low, high } => Support::Interval(low, high),
+            ScalarPrior::Beta { .. } => Support::Interval(0.0, 1.0),
+        }
+    }
+
     /// `log p(theta)`, `-inf` outside the support. Hyperparameters must have passed
     /// [`check`](Self::check); otherwise the value is NaN.
     pub fn log_density(&self, theta: f64) -> f64 {
+        if !self.support().contains(theta) {
+            return f64::NEG_INFINITY;
+        }
         let value = match *self {
             ScalarPrior::Normal { mean, sd } => Normal::new(mean, sd).map(|d| d.ln_pdf(theta)).ok(),
             ScalarPrior::LogNormal { mu, sigma } => {
-                if theta <= 0.0 {
-                    return f64::NEG_INFINITY;
-                }
                 LogNormal::new(mu, sigma).map(|d| d.ln_pdf(theta)).ok()
             }
             ScalarPrior::Gamma { shape, rate } => {
-                if theta <= 0.0 {
-                    return f64::NEG_INFINITY;
-                }
                 Gamma::new(shape, rate).map(|d| d.ln_pdf(theta)).ok()
             }
-            ScalarPrior::InverseGamma { shape, scale } => {
-                if theta <= 0.0 {
-                    return f64::NEG_INFINITY;
-                }
-                InverseGamma::new(shape, scale)
-                    .map(|d| d.ln_pdf(theta))
-                    .ok()
-            }
+            ScalarPrior::InverseGamma { shape, scale } => InverseGamma::new(shape, scale)
+                .map(|d| d.ln_pdf(theta))
+                .ok(),
             ScalarPrior::Uniform { low, high } => {
-                if !(theta > low && theta < high) {
-                    return f64::NEG_INFINITY;
-                }
                 Uniform::new(low, high).map(|d| d.ln_pdf(theta)).ok()
             }
-            ScalarPrior::Beta { a, b } => {
-                if !(theta > 0.0 && theta < 1.0) {
-                    return f64::NEG_INFINITY;
-                }
-                Beta::new(a, b).map(|d| d.ln_pdf(theta)).ok()
-            }
-            ScalarPrior::Flat => {
-                return if theta.is_finite() {
-                    0.0
-                } else {
-                    f64::NEG_INFINITY
-                };
-            }
+            ScalarPrior::Beta { a, b } => Beta::new(a, b).map(|d| d.ln_pdf(theta)).ok(),
+            ScalarPrior::Flat => Some(0.0),
         };
         value.unwrap_or(f64::NAN)
     }

@@ -241,7 +241,7 @@ impl ConditionalSmc {
         match self.kernel {
             CsmcKernel::BackwardSimulation => self.backward_simulate(model, data, out, rng)?,
             _ => {
-                let k = self.draw_final(rng)?;
+                let k = self.draw_final(rng);
                 self.trace(k, out);
             }
         }
@@ -458,14 +458,14 @@ impl ConditionalSmc {
         Ok(())
     }
 
-    fn draw_final<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> Result<usize, SmcError> {
+    fn draw_final<R: rand::Rng + ?Sized>(&self, rng: &mut R) -> usize {
         let m = self.particles;
         let last = self.steps - 1;
         let weights: Vec<f64> = self.log_weights[last * m..]
             .iter()
             .map(|l| l.exp())
             .collect();
-        Ok(find_cumulative(&weights, rng.random::<f64>()))
+        find_cumulative(&weights, rng.random::<f64>())
     }
 
     /// Copies the path traced back from `x_{T-1}^k` into `out`.
@@ -486,7 +486,7 @@ impl ConditionalSmc {
     ) -> Result<(), SmcError> {
         let (n, m) = (self.state_dim, self.particles);
         let last = self.steps - 1;
-        let mut k = self.draw_final(rng)?;
+        let mut k = self.draw_final(rng);
         out[last * n..].copy_from_slice(self.state(last, k));
         for t in (0..last).rev() {
             let (head, tail) = out.split_at_mut((t + 1) * n);

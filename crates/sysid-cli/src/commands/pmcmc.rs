@@ -301,42 +301,33 @@ fn pmmh_with<F: ModelFamily>(
 ) -> Result<(), CliError> {
     let c = &a.common;
     let prior = priors(c, &family.parameter_names())?;
-    let Prepared {
-        burn_in,
-        start,
-        file,
-        context,
-    } = prepare(c, family, default_start)?;
-    let series = series_of(&file, &context)?;
-    let options = PmmhOptions {
-        iterations: c.iterations,
-        burn_in,
-        particles: c.particles.unwrap_or(100),
-        resampling: Resampling::Systematic,
-        proposal_sd: a.proposal_sd.clone().unwrap_or_default(),
-        adapt: !a.no_adapt,
-    };
-    let started = std::time::Instant::now();
-    let chains = super::particle::pool(c.threads)?
-        .install(|| {
+    let particles = c.particles.unwrap_or(100);
+    sample_and_report(
+        c,
+        family,
+        default_start,
+        "pmmh",
+        particles,
+        |series, start, burn_in| {
+            let options = PmmhOptions {
+                iterations: c.iterations,
+                burn_in,
+                particles,
+                resampling: Resampling::Systematic,
+                proposal_sd: a.proposal_sd.clone().unwrap_or_default(),
+                adapt: !a.no_adapt,
+            };
             pmmh(
                 family,
                 &prior,
-                &series,
-                &start,
+                series,
+                start,
                 &options,
                 c.chains,
                 c.seed,
                 &(),
             )
-        })
-        .map_err(pmcmc_error(&context))?;
-    finish(
-        c,
-        "pmmh",
-        options.particles,
-        &chains,
-        started.elapsed().as_secs_f64(),
+        },
     )
 }
 
@@ -444,6 +435,45 @@ where
     S: sysid::pmcmc::ParameterStep<F>,
 {
     let c = &a.common;
+    let particles = c.particles.unwrap_or(10);
+    sample_and_report(
+        c,
+        family,
+        default_start,
+        "pgas",
+        particles,
+        |series, start, burn_in| {
+            let options = GibbsOptions {
+                iterations: c.iterations,
+                burn_in,
+                particles,
+                kernel,
+            };
+            run(
+                family,
+                prior,
+                step,
+                series,
+                start,
+                &options,
+                c.chains,
+                c.seed,
+                &(),
+            )
+        },
+    )
+}
+
+/// What both samplers do around the sampling: check the options and the start, read
+/// the data, run `sample(series, start, burn_in)` on the `--threads` pool, and report.
+fn sample_and_report<F: ModelFamily>(
+    c: &ChainArgs,
+    family: &F,
+    default_start: Vec<f64>,
+    command: &str,
+    particles: usize,
+    sample: impl FnOnce(&sysid::smc::Series, &[f64], usize) -> Result<Vec<Chain>, PmcmcError> + Send,
+) -> Result<(), CliError> {
     let Prepared {
         burn_in,
         start,
@@ -451,32 +481,14 @@ where
         context,
     } = prepare(c, family, default_start)?;
     let series = series_of(&file, &context)?;
-    let options = GibbsOptions {
-        iterations: c.iterations,
-        burn_in,
-        particles: c.particles.unwrap_or(10),
-        kernel,
-    };
     let started = std::time::Instant::now();
     let chains = super::particle::pool(c.threads)?
-        .install(|| {
-            run(
-                family,
-                prior,
-                step,
-                &series,
-                &start,
-                &options,
-                c.chains,
-                c.seed,
-                &(),
-            )
-        })
+        .install(|| sample(&series, &start, burn_in))
         .map_err(pmcmc_error(&context))?;
     finish(
         c,
-        "pgas",
-        options.particles,
+        command,
+        particles,
         &chains,
         started.elapsed().as_secs_f64(),
     )

@@ -35,9 +35,10 @@ pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
 pub use stats::{AffineStatistics, StatisticsCollector};
 
+use crate::EmAlgorithm;
 use crate::linear::Covariance;
-use crate::{EmAlgorithm, sub_seed};
-use sysid_smc::{FilterOptions, ParticleFilter, Series, SmcError, Smoother};
+use crate::particle_pass::ParticlePass;
+use sysid_smc::{Series, SmcError, Smoother};
 
 /// Errors of affine EM.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -97,9 +98,7 @@ pub struct AffineEm<'a, A, S> {
     data: Series<'a>,
     smoother: S,
     spec: AffineEmSpec,
-    filter: ParticleFilter,
-    seed: u64,
-    iteration: u64,
+    pass: ParticlePass,
 }
 
 impl<'a, A: AffineModel, S: Smoother<A::Smc>> AffineEm<'a, A, S> {
@@ -120,19 +119,12 @@ impl<'a, A: AffineModel, S: Smoother<A::Smc>> AffineEm<'a, A, S> {
                 model.output_dim()
             )));
         }
-        let filter = ParticleFilter::new(FilterOptions {
-            particles,
-            store_history: true,
-            ..FilterOptions::default()
-        })?;
         Ok(AffineEm {
             model,
             data,
             smoother,
             spec,
-            filter,
-            seed,
-            iteration: 0,
+            pass: ParticlePass::new(particles, seed)?,
         })
     }
 
@@ -142,22 +134,17 @@ impl<'a, A: AffineModel, S: Smoother<A::Smc>> AffineEm<'a, A, S> {
         &mut self,
         params: &AffineParams,
     ) -> Result<(f64, AffineStatistics), AffineEmError> {
-        let k = self.iteration;
-        self.iteration += 1;
         let smc = self.model.smc_model(params)?;
-        let run = self
-            .filter
-            .run(&smc, &self.data, sub_seed(self.seed, 2 * k))?;
-        let history = self.filter.history().expect("history is stored");
+        let pass = self.pass.run(&smc, &self.data)?;
         let mut collector = StatisticsCollector::new(self.model, &self.data);
         self.smoother.additive(
             &smc,
-            history,
+            pass.history,
             &self.data,
-            sub_seed(self.seed, 2 * k + 1),
+            pass.smoother_seed,
             &mut collector,
         )?;
-        Ok((run.loglik, collector.finish()))
+        Ok((pass.loglik, collector.finish()))
     }
 }
 
@@ -173,10 +160,7 @@ impl<A: AffineModel, S: Smoother<A::Smc>> EmAlgorithm for AffineEm<'_, A, S> {
 
     fn loglik(&mut self, estimate: &AffineParams) -> Result<f64, AffineEmError> {
         let smc = self.model.smc_model(estimate)?;
-        Ok(self
-            .filter
-            .run(&smc, &self.data, sub_seed(self.seed, u64::MAX))?
-            .loglik)
+        Ok(self.pass.loglik(&smc, &self.data)?)
     }
 
     fn is_exact(&self) -> bool {

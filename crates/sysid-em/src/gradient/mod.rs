@@ -41,8 +41,9 @@ pub use model::{GradientModel, Gradients, central_difference};
 pub use mstep::{MStepOptions, MStepOutcome, m_step};
 pub use objective::q_hat;
 
-use crate::{EmAlgorithm, sub_seed};
-use sysid_smc::{FilterOptions, ParticleFilter, Series, SmcError, Smoother};
+use crate::EmAlgorithm;
+use crate::particle_pass::ParticlePass;
+use sysid_smc::{Series, SmcError, Smoother};
 
 /// Errors of gradient EM.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -72,10 +73,8 @@ pub struct GradientEm<'a, G, S> {
     model: &'a G,
     data: Series<'a>,
     smoother: S,
-    filter: ParticleFilter,
+    pass: ParticlePass,
     options: MStepOptions,
-    seed: u64,
-    iteration: u64,
     last: Option<MStepOutcome>,
 }
 
@@ -90,19 +89,12 @@ impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {
         options: MStepOptions,
         seed: u64,
     ) -> Result<Self, GradientEmError> {
-        let filter = ParticleFilter::new(FilterOptions {
-            particles,
-            store_history: true,
-            ..FilterOptions::default()
-        })?;
         Ok(GradientEm {
             model,
             data,
             smoother,
-            filter,
+            pass: ParticlePass::new(particles, seed)?,
             options,
-            seed,
-            iteration: 0,
             last: None,
         })
     }
@@ -125,32 +117,22 @@ impl<G: GradientModel, S: Smoother<G::Smc>> EmAlgorithm for GradientEm<'_, G, S>
                 self.model.parameter_dim()
             )));
         }
-        let k = self.iteration;
-        self.iteration += 1;
         let smc = self.model.smc_model(current)?;
-        let run = self
-            .filter
-            .run(&smc, &self.data, sub_seed(self.seed, 2 * k))?;
-        let history = self.filter.history().expect("history is stored");
-        let (paths, _) = self.smoother.trajectories(
-            &smc,
-            history,
-            &self.data,
-            sub_seed(self.seed, 2 * k + 1),
-        )?;
+        let pass = self.pass.run(&smc, &self.data)?;
+        let loglik = pass.loglik;
+        let (paths, _) =
+            self.smoother
+                .trajectories(&smc, pass.history, &self.data, pass.smoother_seed)?;
         let warm = self.last.as_mut().and_then(|m| m.inverse_hessian.take());
         let outcome = m_step(self.model, &paths, &self.data, current, &self.options, warm)?;
         let next = outcome.theta.clone();
         self.last = Some(outcome);
-        Ok((next, run.loglik))
+        Ok((next, loglik))
     }
 
     fn loglik(&mut self, estimate: &Vec<f64>) -> Result<f64, GradientEmError> {
         let smc = self.model.smc_model(estimate)?;
-        Ok(self
-            .filter
-            .run(&smc, &self.data, sub_seed(self.seed, u64::MAX))?
-            .loglik)
+        Ok(self.pass.loglik(&smc, &self.data)?)
     }
 
     fn is_exact(&self) -> bool {

@@ -4,19 +4,17 @@
 //! log-likelihoods, iterations and frequency-response errors.
 
 use crate::emit;
-use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde_json::{Value, json};
 use std::time::Instant;
 use sysid::em::linear::fit;
 use sysid::em::{EmOptions, Termination};
 use sysid::kalman::{KalmanWorkspace, LinearGaussianModel};
-use sysid::models::{System, lti2x2, lti2x2_experiment_start, lti2x2_initial_guess};
+use sysid::models::{
+    LTI2X2_PAPER_START_Q, System, lti2x2, lti2x2_experiment_start, lti2x2_paper_start,
+};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
-/// Process-noise covariance given to the paper's initial model (ours: the paper's
-/// model has none, and EM cannot move `A` with `Q = 0`).
-const INITIAL_Q: f64 = 0.01;
 /// Frequency grid of the response errors.
 const GRID: usize = 512;
 
@@ -56,11 +54,7 @@ fn one_dataset(index: usize, args: &Args) -> Vec<Value> {
     }
     .check()
     .expect("valid options");
-    let paper = lti2x2_initial_guess()
-        .to_builder()
-        .q(DMatrix::identity(6, 6) * INITIAL_Q)
-        .build()
-        .expect("valid start");
+    let paper = lti2x2_paper_start();
     let n4sid_start = Instant::now();
     let subspace = n4sid(
         &records[0],
@@ -95,7 +89,7 @@ fn one_dataset(index: usize, args: &Args) -> Vec<Value> {
         let mut line = json!({
             "task": "lti2x2_run",
             "params": {"dataset": index, "seed": seed, "start": name, "T": args.steps,
-                       "max_iter": args.max_iter, "tol": args.tol, "initial_q": INITIAL_Q},
+                       "max_iter": args.max_iter, "tol": args.tol, "initial_q": LTI2X2_PAPER_START_Q},
             "loglik_true": loglik_true,
             "loglik_initial": loglik_initial,
             "loglik_final": result.loglik,

@@ -7,15 +7,14 @@
 //! runs with `r % n == i`) merge into exactly the unsharded output.
 
 use crate::emit;
-use rand::RngExt;
 use rayon::prelude::*;
 use serde_json::json;
 use std::io::Write;
-use sysid::em::affine::{AffineEm, AffineEmSpec, AffineParams};
-use sysid::em::linear::Covariance;
-use sysid::em::{EmObserver, EmOptions, IterationInfo, run_em};
-use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
-use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki, stream};
+use sysid::models::nlbench_study::{
+    NlbenchStudy, NoiseSetting, abcd, within_ten_percent as converged,
+};
+use sysid::models::{Nlbench, NlbenchParams};
+use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki};
 
 /// The runner's settings (the `nlbench-em` command line).
 #[derive(clap::Args, Debug)]
@@ -86,75 +85,23 @@ struct RunResult {
     trace: Vec<[f64; 4]>,
 }
 
-fn abcd(p: &NlbenchParams) -> [f64; 4] {
-    [p.a, p.b, p.c, p.d]
-}
-
-/// Every one of a, b, c, d within 10 % of the truth.
-fn converged(p: &NlbenchParams) -> bool {
-    let truth = abcd(&NlbenchParams::TRUE);
-    abcd(p)
-        .iter()
-        .zip(truth)
-        .all(|(v, t)| ((v - t) / t).abs() <= 0.1)
-}
-
-struct Trace(Vec<[f64; 4]>);
-
-impl EmObserver<AffineParams> for Trace {
-    fn iteration(&mut self, info: &IterationInfo<'_, AffineParams>) {
-        self.0
-            .push(abcd(&NlbenchAffine::nlbench_params(info.estimate)));
-    }
-}
-
 fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<RunResult, String> {
-    let seed_of = |k: u64| -> u64 { stream(a.seed, 3 * run as u64 + k).random() };
-    let sim = Nlbench::truth().simulate(a.steps, seed_of(0));
-    let data = Series::new(&sim.outputs, 1).map_err(|e| e.to_string())?;
-    let mut rng = stream(seed_of(1), 0);
-    let mut factor = || rng.random_range(0.5..1.5);
-    let truth = NlbenchParams::TRUE;
-    let mut start = NlbenchParams {
-        a: truth.a * factor(),
-        b: truth.b * factor(),
-        c: truth.c * factor(),
-        d: truth.d * factor(),
-        ..truth
+    let noise = match a.noise.as_str() {
+        "estimated" => NoiseSetting::Estimated,
+        "q" => NoiseSetting::ProcessOnly,
+        _ => NoiseSetting::Known,
     };
-    let (pi_x, pi_y) = match a.noise.as_str() {
-        "estimated" => {
-            // A deliberately loose start: EM shrinks q and r as the fit improves.
-            start.q = 10.0 * truth.q;
-            start.r = 10.0 * truth.r;
-            (Covariance::Diagonal, Covariance::Diagonal)
-        }
-        "q" => {
-            start.q = 100.0 * truth.q;
-            (Covariance::Diagonal, Covariance::Fixed)
-        }
-        // q and r known (ALGORITHMS.md 3): only a, b, c, d are estimated.
-        _ => (Covariance::Fixed, Covariance::Fixed),
+    let study = NlbenchStudy {
+        seed: a.seed,
+        steps: a.steps,
+        particles: a.particles,
+        iterations: a.iters,
+        noise,
     };
-    let spec = AffineEmSpec {
-        pi_x,
-        pi_y,
-        ..AffineEmSpec::default()
-    };
-    let model = NlbenchAffine;
-    let mut em = AffineEm::new(&model, data, a.particles, smoother, spec, seed_of(2))
+    let r = study
+        .run(run, smoother, &mut ())
         .map_err(|e| e.to_string())?;
-    let options = EmOptions {
-        max_iterations: a.iters,
-        tol: 0.0,
-        ..EmOptions::default()
-    }
-    .check()
-    .map_err(|e| e.to_string())?;
-    let mut trace = Trace(Vec::with_capacity(a.iters));
-    let result = run_em(&mut em, NlbenchAffine::params(&start), &options, &mut trace);
-    let estimate = NlbenchAffine::nlbench_params(&result.estimate);
-    let reference_data = Series::new(&sim.outputs, 1).map_err(|e| e.to_string())?;
+    let reference_data = Series::new(&r.outputs, 1).map_err(|e| e.to_string())?;
     let reference = |params: NlbenchParams| -> Option<f64> {
         let model = Nlbench::new(params).ok()?;
         let mut filter = ParticleFilter::new(FilterOptions {
@@ -163,22 +110,22 @@ fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<Ru
         })
         .ok()?;
         filter
-            .run(&model, &reference_data, seed_of(2))
+            .run(&model, &reference_data, study.run_seed(run, 2))
             .ok()
             .map(|s| s.loglik)
     };
     Ok(RunResult {
         run,
-        start,
-        estimate,
-        reference_truth: reference(truth),
-        reference_start: reference(start),
-        reference_final: reference(estimate),
-        iterations: result.iterations,
-        decreases: result.decreases,
-        final_loglik: result.loglik.unwrap_or(f64::NAN),
-        seconds: result.elapsed.as_secs_f64(),
-        trace: trace.0,
+        start: r.start,
+        estimate: r.estimate,
+        reference_truth: reference(NlbenchParams::TRUE),
+        reference_start: reference(r.start),
+        reference_final: reference(r.estimate),
+        iterations: r.em.iterations,
+        decreases: r.em.decreases,
+        final_loglik: r.em.loglik.unwrap_or(f64::NAN),
+        seconds: r.em.elapsed.as_secs_f64(),
+        trace: r.trajectory,
     })
 }
 

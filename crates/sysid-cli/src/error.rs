@@ -12,6 +12,8 @@ pub enum CliError {
     },
     #[error("{path}: refusing to overwrite an existing file (use --force)")]
     WouldOverwrite { path: PathBuf },
+    #[error("{0}")]
+    Plot(sysid_plot::PlotError),
     #[error("{path}: the file is empty (expected a header line)")]
     EmptyFile { path: PathBuf },
     #[error("{path}: no data rows after the header")]
@@ -123,6 +125,10 @@ impl CliError {
         };
         let bad_input = match self {
             CliError::Io { .. } | CliError::Kalman { .. } => false,
+            CliError::Plot(e) => !matches!(
+                e,
+                sysid_plot::PlotError::Io { .. } | sysid_plot::PlotError::Draw { .. }
+            ),
             CliError::Subspace(e) => !matches!(e, SubspaceError::Numerical(_)),
             CliError::Em(e) => !matches!(e, LinearEmError::Kalman(_) | LinearEmError::Linalg(_)),
             CliError::Smc { source, .. } => smc_input(source),
@@ -155,6 +161,16 @@ impl CliError {
             EXIT_BAD_INPUT
         } else {
             EXIT_FAILURE
+        }
+    }
+}
+
+impl From<sysid_plot::PlotError> for CliError {
+    fn from(e: sysid_plot::PlotError) -> CliError {
+        match e {
+            sysid_plot::PlotError::Io { path, source } => CliError::Io { path, source },
+            sysid_plot::PlotError::WouldOverwrite { path } => CliError::WouldOverwrite { path },
+            other => CliError::Plot(other),
         }
     }
 }

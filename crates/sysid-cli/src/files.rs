@@ -2,32 +2,17 @@
 
 use crate::error::CliError;
 use nalgebra::DMatrix;
-use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Write};
+use std::fs::File;
+use std::io::Write;
 use std::path::Path;
 use sysid::kalman::{LinearGaussianModel, ModelSpec, Record};
+use sysid_plot::PendingFile;
 
-/// Opens `path` for writing; refuses to replace an existing file unless `force`.
-pub fn create_output(path: &Path, force: bool) -> Result<BufWriter<File>, CliError> {
-    let mut options = OpenOptions::new();
-    options.write(true);
-    if force {
-        options.create(true).truncate(true);
-    } else {
-        options.create_new(true);
-    }
-    options.open(path).map(BufWriter::new).map_err(|source| {
-        if source.kind() == std::io::ErrorKind::AlreadyExists {
-            CliError::WouldOverwrite {
-                path: path.to_path_buf(),
-            }
-        } else {
-            CliError::Io {
-                path: path.to_path_buf(),
-                source,
-            }
-        }
-    })
+/// Starts writing `path` atomically (a temporary file renamed into place by
+/// [`PendingFile::commit`]; an error part-way leaves nothing behind); refuses to
+/// replace an existing file unless `force`.
+pub fn create_output(path: &Path, force: bool) -> Result<PendingFile, CliError> {
+    Ok(PendingFile::create(path, force)?)
 }
 
 /// Refuses, before any work, outputs that exist when `force` is not given (the final
@@ -47,15 +32,15 @@ pub fn refuse_existing<'a>(
     }
 }
 
-/// Writes `contents` through [`create_output`].
+/// Writes `contents` atomically through [`create_output`].
 pub fn write_output(path: &Path, force: bool, contents: &str) -> Result<(), CliError> {
     let mut w = create_output(path, force)?;
     w.write_all(contents.as_bytes())
-        .and_then(|_| w.flush())
         .map_err(|source| CliError::Io {
             path: path.to_path_buf(),
             source,
-        })
+        })?;
+    Ok(w.commit()?)
 }
 
 /// The error of a JSON file `path` (a `what` file) that does not parse: its line,
@@ -139,10 +124,13 @@ fn select(
     }
 }
 
-/// Reads a CSV data file with a header. Output cells that are empty, `NaN` or `NA` are
-/// missing; input cells must be finite numbers. Errors name the file, the line
-/// (1-based, the header is line 1) and the column.
-pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliError> {
+/// A CSV row with its line number.
+pub type NumberedRow = (u64, csv::StringRecord);
+
+/// A CSV file's header and its non-blank rows with their line numbers (1-based, the
+/// header is line 1); refuses an empty file and rows whose length differs from the
+/// header's.
+pub fn read_rows(path: &Path) -> Result<(Vec<String>, Vec<NumberedRow>), CliError> {
     let file = File::open(path).map_err(|source| CliError::Io {
         path: path.to_path_buf(),
         source,
@@ -156,8 +144,8 @@ pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliErro
         path: path.to_path_buf(),
         message: e.to_string(),
     };
-    let mut rows = reader.records();
-    let header: Vec<String> = match rows.next() {
+    let mut records = reader.records();
+    let header: Vec<String> = match records.next() {
         None => {
             return Err(CliError::EmptyFile {
                 path: path.to_path_buf(),
@@ -170,11 +158,8 @@ pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliErro
             path: path.to_path_buf(),
         });
     }
-    let input_cols = select(path, &header, &choice.inputs, 'u')?;
-    let output_cols = select(path, &header, &choice.outputs, 'y')?;
-    let time_col = header.iter().position(|h| h == "t");
-    let (mut u, mut y, mut time) = (Vec::new(), Vec::new(), Vec::new());
-    for row in rows {
+    let mut rows = Vec::new();
+    for row in records {
         let row = row.map_err(csv_err)?;
         let line = row.position().map_or(0, |p| p.line());
         if row.len() == 1 && row[0].is_empty() {
@@ -188,6 +173,49 @@ pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliErro
                 found: row.len(),
             });
         }
+        rows.push((line, row));
+    }
+    Ok((header, rows))
+}
+
+/// A numeric CSV file (e.g. one written by sysid): the header and the columns, with
+/// empty, `NaN` or `NA` cells as NaN; any other non-number is an error naming the line.
+pub fn read_columns(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>), CliError> {
+    let (header, rows) = read_rows(path)?;
+    if rows.is_empty() {
+        return Err(CliError::NoRows {
+            path: path.to_path_buf(),
+        });
+    }
+    let mut columns = vec![Vec::with_capacity(rows.len()); header.len()];
+    for (line, row) in &rows {
+        for (c, field) in row.iter().enumerate() {
+            let value = if is_missing(field) {
+                f64::NAN
+            } else {
+                field.parse().map_err(|_| CliError::NotANumber {
+                    path: path.to_path_buf(),
+                    line: *line,
+                    column: header[c].clone(),
+                    value: field.to_string(),
+                })?
+            };
+            columns[c].push(value);
+        }
+    }
+    Ok((header, columns))
+}
+
+/// Reads a CSV data file with a header. Output cells that are empty, `NaN` or `NA` are
+/// missing; input cells must be finite numbers. Errors name the file, the line
+/// (1-based, the header is line 1) and the column.
+pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliError> {
+    let (header, rows) = read_rows(path)?;
+    let input_cols = select(path, &header, &choice.inputs, 'u')?;
+    let output_cols = select(path, &header, &choice.outputs, 'y')?;
+    let time_col = header.iter().position(|h| h == "t");
+    let (mut u, mut y, mut time) = (Vec::new(), Vec::new(), Vec::new());
+    for (line, row) in rows {
         let number =
             |col: usize, role: &'static str, allow_missing: bool| -> Result<f64, CliError> {
                 let field = &row[col];

@@ -137,6 +137,21 @@ pub trait EmObserver<T> {
 /// The observer that does nothing.
 impl<T> EmObserver<T> for () {}
 
+/// An observer lent to a run.
+impl<T, O: EmObserver<T> + ?Sized> EmObserver<T> for &mut O {
+    fn iteration(&mut self, info: &IterationInfo<'_, T>) {
+        (**self).iteration(info);
+    }
+}
+
+/// Two observers, called in order (e.g. a trace and a progress bar).
+impl<T, A: EmObserver<T>, B: EmObserver<T>> EmObserver<T> for (A, B) {
+    fn iteration(&mut self, info: &IterationInfo<'_, T>) {
+        self.0.iteration(info);
+        self.1.iteration(info);
+    }
+}
+
 /// The result of a run.
 #[derive(Debug, Clone)]
 pub struct EmResult<T, E> {

@@ -16,6 +16,7 @@ mod families;
 mod gradient_lgss;
 mod linear_smc;
 mod nlbench;
+pub mod nlbench_study;
 mod wiener;
 
 pub use affine::{LinearAffine, NlbenchAffine};
@@ -130,6 +131,20 @@ pub fn lti2x2_initial_guess() -> LinearGaussianModel {
         &[0, 0, 1, 1],
         0.01,
     )
+}
+
+/// Process-noise variance given to the paper's initial model as an EM start (ours:
+/// the paper's model has `Q = 0`, from which EM cannot move `A`).
+pub const LTI2X2_PAPER_START_Q: f64 = 0.01;
+
+/// The paper's initial model as an EM start: [`lti2x2_initial_guess`] with
+/// `Q = LTI2X2_PAPER_START_Q I`.
+pub fn lti2x2_paper_start() -> LinearGaussianModel {
+    lti2x2_initial_guess()
+        .to_builder()
+        .q(DMatrix::identity(6, 6) * LTI2X2_PAPER_START_Q)
+        .build()
+        .expect("a positive process noise keeps the model valid")
 }
 
 /// What linear EM estimates in the seed-004 experiment: `A, B, C, D, Q, R`, with the

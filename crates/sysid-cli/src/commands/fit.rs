@@ -176,13 +176,15 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let start = initial_model(o, &file)?;
     let start = apply(start, &mut spec, &fixes, &o.diag)?;
     let start = spec.project(&start)?;
+    let mut progress = crate::progress::Progress::new(o.max_iter as u64, "fit lti", o.json);
     let result = fit(
         start,
         std::slice::from_ref(&file.record),
         spec,
         &options,
-        &mut (),
+        &mut progress,
     );
+    progress.finish();
     let stop = match &result.termination {
         Termination::Error { error, .. } => return Err(CliError::Em(error.clone())),
         Termination::Converged => "converged",

@@ -309,7 +309,15 @@ where
         row,
         rows: Vec::new(),
     };
-    let result = run_em(&mut em, start, &job.options, &mut trace);
+    let progress =
+        crate::progress::Progress::new(job.options.max_iterations as u64, method, o.json);
+    let result = run_em(
+        &mut em,
+        start,
+        &job.options,
+        &mut (&mut trace, progress.clone()),
+    );
+    progress.finish();
     if let Termination::Error { iteration, error } = &result.termination {
         return Err(affine_error(&format!(
             "{context}, EM iteration {iteration}"

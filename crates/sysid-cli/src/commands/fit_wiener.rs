@@ -89,7 +89,15 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             format!("{context}: the N4SID start is unusable: {e}"),
         )
     })?;
-    let result = run_em(&mut em, theta, &options, &mut trace);
+    let progress =
+        crate::progress::Progress::new(options.max_iterations as u64, "fit wiener", o.json);
+    let result = run_em(
+        &mut em,
+        theta,
+        &options,
+        &mut (&mut trace, progress.clone()),
+    );
+    progress.finish();
     if let Termination::Error { iteration, error } = &result.termination {
         return Err(CliError::GradientEm {
             context: format!("{context}, EM iteration {iteration}"),

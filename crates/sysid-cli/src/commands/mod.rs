@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod demo;
 pub mod fit;
 pub mod fit_affine;
 pub mod fit_wiener;
@@ -7,6 +8,7 @@ pub mod fix;
 pub mod loglik;
 pub mod n4sid;
 pub mod particle;
+pub mod plot;
 pub mod pmcmc;
 pub mod simulate;
 pub mod smooth;

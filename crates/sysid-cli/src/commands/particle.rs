@@ -36,9 +36,6 @@ pub struct ParticleArgs {
     /// Seed of the random streams.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Worker threads for the particle chunks (the result does not depend on it).
-    #[arg(long, default_value_t = 1)]
-    pub threads: usize,
     /// Output CSV file.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -79,18 +76,12 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
             Resampling::ALL.map(Resampling::name).join(", ")
         ),
     })?;
-    if a.threads == 0 {
-        return Err(CliError::BadOption {
-            option: "--threads",
-            message: "must be at least 1".into(),
-        });
-    }
     let options = FilterOptions {
         particles: a.particles,
         resampling,
         ess_threshold: a.ess,
         store_history,
-        parallel: a.threads > 1,
+        parallel: crate::threads() > 1,
     };
     options.check().map_err(smc_error("options"))?;
     Ok(options)
@@ -139,16 +130,6 @@ fn read_series(a: &ParticleArgs, outputs: usize, inputs: usize) -> Result<DataFi
     Ok(file)
 }
 
-pub(crate) fn pool(threads: usize) -> Result<rayon::ThreadPool, CliError> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| CliError::BadOption {
-            option: "--threads",
-            message: e.to_string(),
-        })
-}
-
 /// Writes `t, x1.., [x1_sd..]` rows.
 fn write_states(
     a: &ParticleArgs,
@@ -177,7 +158,7 @@ fn write_states(
         }
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
-    w.flush().map_err(io)
+    Ok(w.commit()?)
 }
 
 /// `sysid pf`.
@@ -203,8 +184,8 @@ fn filter_with<M: FilterModel + Sync>(
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
     let start = std::time::Instant::now();
-    let run = pool(a.threads)?
-        .install(|| pf.run(model, &series, a.seed))
+    let run = pf
+        .run(model, &series, a.seed)
         .map_err(smc_error(&context))?;
     let seconds = start.elapsed().as_secs_f64();
     write_states(a, &file.time, model.state_dim(), pf.means(), None)?;
@@ -258,10 +239,12 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     let context = c.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
-    let parallel = c.threads > 1;
+    let parallel = crate::threads() > 1;
     let start = std::time::Instant::now();
-    let (run, (paths, stats)) = pool(c.threads)?.install(|| {
-        let run = pf.run(model, &series, c.seed).map_err(smc_error(&context))?;
+    let (run, (paths, stats)) = (|| {
+        let run = pf
+            .run(model, &series, c.seed)
+            .map_err(smc_error(&context))?;
         let history = pf.history().expect("history stored");
         let seed = c.seed.wrapping_add(1);
         let smoothed = match a.method.as_str() {
@@ -289,7 +272,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         }
         .map_err(smc_error(&context))?;
         Ok((run, smoothed))
-    })?;
+    })()?;
     let seconds = start.elapsed().as_secs_f64();
     let (means, sds) = (paths.means(), paths.std_devs());
     write_states(c, &file.time, model.state_dim(), &means, Some(&sds))?;

@@ -57,9 +57,6 @@ pub struct ChainArgs {
     /// Seed: chain c uses the random stream (seed, c).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Worker threads (the chains are identical for any number).
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
     /// Write every draw: CSV (chain, iteration, burn_in, parameters, loglik, log_prior,
     /// accepted), or JSON (one object per chain) when the name ends in `.json`.
     #[arg(long)]
@@ -213,9 +210,6 @@ fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
     if a.chains == 0 {
         return Err(bad("--chains", "must be at least 1"));
     }
-    if a.threads == 0 {
-        return Err(bad("--threads", "must be at least 1"));
-    }
     let burn_in = a.burn_in.unwrap_or(a.iterations / 5);
     if burn_in >= a.iterations {
         return Err(bad(
@@ -308,7 +302,7 @@ fn pmmh_with<F: ModelFamily>(
         default_start,
         "pmmh",
         particles,
-        |series, start, burn_in| {
+        |series, start, burn_in, observer| {
             let options = PmmhOptions {
                 iterations: c.iterations,
                 burn_in,
@@ -318,14 +312,7 @@ fn pmmh_with<F: ModelFamily>(
                 adapt: !a.no_adapt,
             };
             pmmh(
-                family,
-                &prior,
-                series,
-                start,
-                &options,
-                c.chains,
-                c.seed,
-                &(),
+                family, &prior, series, start, &options, c.chains, c.seed, observer,
             )
         },
     )
@@ -442,7 +429,7 @@ where
         default_start,
         "pgas",
         particles,
-        |series, start, burn_in| {
+        |series, start, burn_in, observer| {
             let options = GibbsOptions {
                 iterations: c.iterations,
                 burn_in,
@@ -450,29 +437,26 @@ where
                 kernel,
             };
             run(
-                family,
-                prior,
-                step,
-                series,
-                start,
-                &options,
-                c.chains,
-                c.seed,
-                &(),
+                family, prior, step, series, start, &options, c.chains, c.seed, observer,
             )
         },
     )
 }
 
 /// What both samplers do around the sampling: check the options and the start, read
-/// the data, run `sample(series, start, burn_in)` on the `--threads` pool, and report.
+/// the data, run `sample(series, start, burn_in, progress)`, and report.
 fn sample_and_report<F: ModelFamily>(
     c: &ChainArgs,
     family: &F,
     default_start: Vec<f64>,
     command: &str,
     particles: usize,
-    sample: impl FnOnce(&sysid::smc::Series, &[f64], usize) -> Result<Vec<Chain>, PmcmcError> + Send,
+    sample: impl FnOnce(
+        &sysid::smc::Series,
+        &[f64],
+        usize,
+        &dyn sysid::pmcmc::ChainObserver,
+    ) -> Result<Vec<Chain>, PmcmcError>,
 ) -> Result<(), CliError> {
     let Prepared {
         burn_in,
@@ -482,9 +466,10 @@ fn sample_and_report<F: ModelFamily>(
     } = prepare(c, family, default_start)?;
     let series = series_of(&file, &context)?;
     let started = std::time::Instant::now();
-    let chains = super::particle::pool(c.threads)?
-        .install(|| sample(&series, &start, burn_in))
-        .map_err(pmcmc_error(&context))?;
+    let progress =
+        crate::progress::Progress::new((c.chains * c.iterations) as u64, command, c.json);
+    let chains = sample(&series, &start, burn_in, &progress).map_err(pmcmc_error(&context))?;
+    progress.finish();
     finish(
         c,
         command,
@@ -522,7 +507,7 @@ fn finish(
             "iterations": a.iterations, "burn_in": chains[0].burn_in, "particles": particles,
             "seed": a.seed, "acceptance": acceptance, "summary": summary,
             "min_state_update_rate": min_update_rate,
-            "seconds": seconds, "ms_per_iteration": 1e3 * seconds * a.threads.min(chains.len()) as f64 / iterations,
+            "seconds": seconds, "ms_per_iteration": 1e3 * seconds * crate::threads().min(chains.len()) as f64 / iterations,
             "out": a.out,
         }),
         || {
@@ -592,5 +577,5 @@ fn write_chains(path: &std::path::Path, force: bool, chains: &[Chain]) -> Result
             .map_err(io)?;
         }
     }
-    w.flush().map_err(io)
+    Ok(w.commit()?)
 }

@@ -73,7 +73,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         }
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
-    w.flush().map_err(io)?;
+    w.commit()?;
     if let Some(path) = &o.model_out {
         let spec = ModelSpec::from_model(&system.model());
         let text = serde_json::to_string_pretty(&spec).expect("a model spec serialises");
@@ -118,7 +118,7 @@ fn run_nlbench(o: &Options) -> Result<(), CliError> {
             writeln!(w, "{},{}", t + 1, fmt(y)).map_err(io)?;
         }
     }
-    w.flush().map_err(io)?;
+    w.commit()?;
     if o.json {
         let summary = serde_json::json!({
             "command": "simulate", "system": "nlbench", "steps": o.steps, "seed": o.seed,
@@ -158,7 +158,7 @@ fn run_wiener(o: &Options) -> Result<(), CliError> {
         }
         writeln!(w, "{row}").map_err(io)?;
     }
-    w.flush().map_err(io)?;
+    w.commit()?;
     crate::report(
         o.json,
         serde_json::json!({

@@ -1,52 +1,89 @@
 use super::{in_data, model_and_data};
-use crate::DataArgs;
+use crate::StatesArgs;
 use crate::error::CliError;
 use crate::files::{create_output, fmt};
 use std::io::Write;
-use std::path::Path;
 use sysid::kalman::KalmanWorkspace;
 
-pub fn run(
-    model_path: &Path,
-    data: &DataArgs,
-    out: &Path,
-    force: bool,
-    json: bool,
-) -> Result<(), CliError> {
-    let (model, file) = model_and_data(model_path, data)?;
+/// Which state estimates `sysid filter` and `sysid smooth` write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pass {
+    /// `E[x_t | y_1..t]` (square-root Kalman filter).
+    Filter,
+    /// `E[x_t | y_1..T]` (RTS smoother).
+    Smooth,
+}
+
+/// One step's state means and standard deviations.
+type MeanAndSd = (Vec<f64>, Vec<f64>);
+
+pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
+    let (model, file) = model_and_data(&a.model, &a.data)?;
     let mut ws = KalmanWorkspace::new();
-    let sm = ws
-        .smooth(&model, &file.record)
-        .map_err(in_data(&data.data))?;
     let n = model.n();
-    let mut w = create_output(out, force)?;
+    // (means, standard deviations) per step, and the log-likelihood
+    let (rows, loglik): (Vec<MeanAndSd>, f64) = match pass {
+        Pass::Filter => {
+            let f = ws
+                .filter(&model, &file.record)
+                .map_err(in_data(&a.data.data))?;
+            let rows = (0..file.record.len())
+                .map(|k| {
+                    let p = f.filtered_covariance(k);
+                    (
+                        f.filtered_mean(k).iter().copied().collect(),
+                        (0..n).map(|i| p[(i, i)].max(0.0).sqrt()).collect(),
+                    )
+                })
+                .collect();
+            (rows, f.loglik())
+        }
+        Pass::Smooth => {
+            let sm = ws
+                .smooth(&model, &file.record)
+                .map_err(in_data(&a.data.data))?;
+            let rows = (0..sm.len())
+                .map(|k| {
+                    let p = sm.covariance(k);
+                    (
+                        sm.mean(k).iter().copied().collect(),
+                        (0..n).map(|i| p[(i, i)].max(0.0).sqrt()).collect(),
+                    )
+                })
+                .collect();
+            (rows, sm.loglik())
+        }
+    };
+    let mut w = create_output(&a.out, a.force)?;
     let io = |source| CliError::Io {
-        path: out.to_path_buf(),
+        path: a.out.clone(),
         source,
     };
     let mut header = vec!["t".to_string()];
     header.extend((1..=n).map(|i| format!("x{i}")));
     header.extend((1..=n).map(|i| format!("x{i}_sd")));
     writeln!(w, "{}", header.join(",")).map_err(io)?;
-    for k in 0..sm.len() {
-        let p = sm.covariance(k);
+    for (k, (mean, sd)) in rows.iter().enumerate() {
         let mut row = vec![fmt(file.time[k])];
-        row.extend(sm.mean(k).iter().map(|&v| fmt(v)));
-        row.extend((0..n).map(|i| fmt(p[(i, i)].max(0.0).sqrt())));
+        row.extend(mean.iter().chain(sd).map(|&v| fmt(v)));
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
-    w.flush().map_err(io)?;
-    if json {
-        let s = serde_json::json!({
-            "command": "smooth", "loglik": sm.loglik(), "steps": sm.len(), "states": n, "out": out,
-        });
-        crate::say(&s.to_string());
-    } else {
-        crate::say(&format!(
-            "loglik {}; wrote smoothed states to {}",
-            sm.loglik(),
-            out.display()
-        ));
-    }
+    w.commit()?;
+    let (command, what) = match pass {
+        Pass::Filter => ("filter", "filtered"),
+        Pass::Smooth => ("smooth", "smoothed"),
+    };
+    crate::report(
+        a.json,
+        serde_json::json!({
+            "command": command, "loglik": loglik, "steps": rows.len(), "states": n, "out": a.out,
+        }),
+        || {
+            format!(
+                "loglik {loglik}; wrote {what} states to {}",
+                a.out.display()
+            )
+        },
+    );
     Ok(())
 }

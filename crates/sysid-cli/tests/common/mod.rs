@@ -48,6 +48,15 @@ pub fn assert_one_line_error(out: &Output, needles: &[&str]) {
     }
 }
 
+/// Asserts success, showing stderr otherwise.
+pub fn assert_ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The JSON summary a successful command printed on stdout.
 pub fn json_of(out: &Output) -> serde_json::Value {
     assert!(

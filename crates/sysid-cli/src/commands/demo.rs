@@ -1,0 +1,650 @@
+//! `sysid demo` (and `cargo run --release`): the pipeline on the papers' systems.
+//!
+//! 1. Seed 004: the 2x2 system of McMillan degree 8, T = 200. N4SID (order 8), then
+//!    exact EM from the N4SID model and from the paper's initial model.
+//! 2. Seed 000: the particle-EM study on `nlbench` (T = 1000, M = 50, Tanizaki) at a
+//!    reduced scale (16 runs x 200 iterations; `--full`: the paper's 200 x 1000).
+//! 3. The smoothed state of one `nlbench` data set at its EM estimate, with a 95 %
+//!    band, against the true state.
+//!
+//! Prints a table and writes four figures (SVG and PNG).
+
+use crate::error::CliError;
+use crate::files::fmt;
+use crate::progress::{Progress, note};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use sysid::em::EmOptions;
+use sysid::em::linear::fit;
+use sysid::kalman::{KalmanWorkspace, LinearGaussianModel};
+use sysid::models::nlbench_study::{
+    NlbenchRun, NlbenchStudy, NoiseSetting, abcd, within_ten_percent,
+};
+use sysid::models::{
+    Nlbench, NlbenchParams, System, lti2x2, lti2x2_em_spec, lti2x2_experiment_start,
+    lti2x2_paper_start,
+};
+use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki};
+use sysid::subspace::{N4sidOptions, Order, n4sid};
+use sysid_plot::{Band, Figure, Panel, Scale, Series as Curve, Stroke};
+
+/// Options of `sysid demo`.
+#[derive(clap::Args, Debug)]
+pub struct Options {
+    /// Where the figures go. The default, ./sysid-demo, belongs to the demo and is
+    /// refreshed on every run; files in a directory given here are replaced only with
+    /// --force.
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    /// Replace existing figures in --out-dir.
+    #[arg(long)]
+    pub force: bool,
+    /// The paper's scale for the particle-EM study: 200 runs x 1000 iterations.
+    #[arg(long)]
+    pub full: bool,
+    /// Particle-EM runs (default 16, or 200 with --full).
+    #[arg(long)]
+    pub runs: Option<usize>,
+    /// EM iterations per particle-EM run (default 200, or 1000 with --full).
+    #[arg(long)]
+    pub iters: Option<usize>,
+    /// Seed of the data sets, starts and particle streams.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print the results as one JSON line instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            out_dir: None,
+            force: false,
+            full: false,
+            runs: None,
+            iters: None,
+            seed: 1,
+            json: false,
+        }
+    }
+}
+
+/// The figures, by file stem.
+const FIGURES: [&str; 4] = ["em-trajectories", "bode", "smoothed-state", "loglik-trace"];
+
+/// Length of the seed-004 data set, EM limits (ALGORITHMS.md 1.5, the `lti2x2` runner).
+const LTI_STEPS: usize = 200;
+const LTI_MAX_ITER: usize = 1000;
+const LTI_TOL: f64 = 1e-7;
+
+/// One linear model's row of the table.
+struct LinearRow {
+    name: &'static str,
+    model: LinearGaussianModel,
+    loglik: Option<f64>,
+    response_error: Option<f64>,
+    iterations: Option<usize>,
+    trace: Vec<f64>,
+    seconds: f64,
+}
+
+struct LinearPart {
+    loglik_true: f64,
+    rows: Vec<LinearRow>,
+}
+
+fn kalman(context: &str) -> impl Fn(sysid::kalman::KalmanError) -> CliError + '_ {
+    move |source| CliError::Kalman {
+        context: context.to_string(),
+        source,
+    }
+}
+
+/// Seed 004: N4SID, then EM from it and from the paper's start.
+fn linear_part(seed: u64, json: bool) -> Result<LinearPart, CliError> {
+    let sim = System::Lti2x2
+        .simulate(LTI_STEPS, seed)
+        .map_err(kalman("lti2x2 simulation"))?;
+    let truth = lti2x2();
+    let records = [sim.record];
+    let mut ws = KalmanWorkspace::new();
+    let loglik_true = ws.loglik(&truth, &records[0]).map_err(kalman("lti2x2"))?;
+    let t0 = Instant::now();
+    let subspace = n4sid(
+        &records[0],
+        &N4sidOptions {
+            order: Order::Fixed(8),
+            block_rows: None,
+        },
+    )?;
+    let n4sid_seconds = t0.elapsed().as_secs_f64();
+    let n4sid_model = lti2x2_experiment_start(&subspace.model);
+    let paper = lti2x2_paper_start();
+    let options = EmOptions {
+        max_iterations: LTI_MAX_ITER,
+        tol: LTI_TOL,
+        ..EmOptions::default()
+    }
+    .check()
+    .map_err(|e| CliError::BadOption {
+        option: "demo",
+        message: e.to_string(),
+    })?;
+    let mut row = |name, model: LinearGaussianModel, iterations, trace, seconds| LinearRow {
+        name,
+        loglik: ws.loglik(&model, &records[0]).ok(),
+        response_error: model.relative_response_error(&truth, 512),
+        iterations,
+        trace,
+        seconds,
+        model,
+    };
+    let mut rows = vec![
+        row("truth", truth.clone(), None, Vec::new(), 0.0),
+        row(
+            "paper's initial model",
+            paper.clone(),
+            None,
+            Vec::new(),
+            0.0,
+        ),
+        row(
+            "N4SID (order 8)",
+            n4sid_model.clone(),
+            None,
+            Vec::new(),
+            n4sid_seconds,
+        ),
+    ];
+    for (name, start) in [
+        ("EM from N4SID", n4sid_model),
+        ("EM from the paper's model", paper),
+    ] {
+        let mut progress = Progress::new(LTI_MAX_ITER as u64, "lti2x2 EM", json);
+        let result = fit(start, &records, lti2x2_em_spec(), &options, &mut progress);
+        progress.finish();
+        let seconds = result.elapsed.as_secs_f64();
+        rows.push(row(
+            name,
+            result.estimate,
+            Some(result.iterations),
+            result.trace,
+            seconds,
+        ));
+    }
+    Ok(LinearPart { loglik_true, rows })
+}
+
+/// Seed 000: the particle-EM study, runs in parallel (each depends only on the seed
+/// and its index).
+fn particle_part(
+    study: &NlbenchStudy,
+    runs: usize,
+    json: bool,
+) -> Result<Vec<NlbenchRun>, CliError> {
+    let progress = Progress::new((runs * study.iterations) as u64, "nlbench EM", json);
+    let results: Vec<NlbenchRun> = (0..runs)
+        .into_par_iter()
+        .map(|run| {
+            study
+                .run(run, Tanizaki::default(), &mut progress.clone())
+                .map_err(|e| CliError::BadOption {
+                    option: "demo",
+                    message: format!("nlbench run {run}: {e}"),
+                })
+        })
+        .collect::<Result<_, _>>()?;
+    progress.finish();
+    Ok(results)
+}
+
+/// The run whose final log-likelihood estimate is the highest.
+fn best_run(runs: &[NlbenchRun]) -> &NlbenchRun {
+    runs.iter()
+        .max_by(|a, b| {
+            let l = |r: &NlbenchRun| r.em.loglik.unwrap_or(f64::NEG_INFINITY);
+            l(a).total_cmp(&l(b))
+        })
+        .expect("at least one run")
+}
+
+/// Pointwise smoothed mean and 2.5 % / 97.5 % quantiles of a run's state at its EM
+/// estimate (rejection FFBSi, 200 paths from a 500-particle filter).
+fn smoothed_state(run: &NlbenchRun, seed: u64) -> Result<Vec<(f64, f64, f64)>, CliError> {
+    let smc = |context: &'static str| {
+        move |source| CliError::Smc {
+            context: context.to_string(),
+            source,
+        }
+    };
+    let model = Nlbench::new(run.estimate).map_err(|e| CliError::BadOption {
+        option: "demo",
+        message: format!("nlbench estimate: {e}"),
+    })?;
+    let data = Series::new(&run.outputs, 1).map_err(smc("nlbench data"))?;
+    let mut filter = ParticleFilter::new(FilterOptions {
+        particles: 500,
+        store_history: true,
+        ..FilterOptions::default()
+    })
+    .map_err(smc("filter options"))?;
+    filter
+        .run(&model, &data, seed)
+        .map_err(smc("nlbench filter"))?;
+    let history = filter.history().ok_or_else(|| CliError::BadOption {
+        option: "demo",
+        message: "the particle filter kept no history".into(),
+    })?;
+    let (paths, _) = FfbsiReject {
+        paths: 200,
+        max_trials: None,
+        parallel: true,
+    }
+    .trajectories(&model, history, &data, seed.wrapping_add(1))
+    .map_err(smc("nlbench smoother"))?;
+    Ok((0..paths.steps())
+        .map(|t| {
+            let mut xs = paths.states(t).to_vec();
+            xs.sort_by(f64::total_cmp);
+            let q = |p: f64| xs[((p * (xs.len() - 1) as f64).round() as usize).min(xs.len() - 1)];
+            let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+            (mean, q(0.025), q(0.975))
+        })
+        .collect())
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let k = v.len();
+    if k == 0 {
+        f64::NAN
+    } else if k % 2 == 1 {
+        v[k / 2]
+    } else {
+        0.5 * (v[k / 2 - 1] + v[k / 2])
+    }
+}
+
+/// |G_ij(e^{i omega})| in dB on a log grid, per channel.
+fn bode_panels(rows: &[LinearRow]) -> Vec<Panel> {
+    let grid: Vec<f64> = (0..240)
+        .map(|k| std::f64::consts::PI * 10f64.powf(-2.5 + 2.5 * k as f64 / 239.0))
+        .collect();
+    let responses: Vec<Vec<Option<DMatrix<nalgebra::Complex<f64>>>>> = rows
+        .iter()
+        .map(|r| {
+            grid.iter()
+                .map(|&w| r.model.frequency_response(w))
+                .collect()
+        })
+        .collect();
+    let mut panels = Vec::new();
+    for i in 0..2 {
+        for j in 0..2 {
+            let mut panel = Panel::new(
+                format!("G{}{}", i + 1, j + 1),
+                "frequency (rad/sample)",
+                "magnitude (dB)",
+            )
+            .scales(Scale::Log, Scale::Linear);
+            for (k, row) in rows
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| r.name != "EM from the paper's model")
+            {
+                let points = grid
+                    .iter()
+                    .zip(&responses[k])
+                    .map(|(&w, g)| {
+                        (
+                            w,
+                            g.as_ref()
+                                .map_or(f64::NAN, |g| 20.0 * g[(i, j)].norm().log10()),
+                        )
+                    })
+                    .collect();
+                let curve = Curve::line(row.name, points);
+                panel = panel.with_series(if row.name == "truth" {
+                    curve.stroke(Stroke::Dashed).colour(6)
+                } else {
+                    curve.colour(k)
+                });
+            }
+            panels.push(panel);
+        }
+    }
+    panels
+}
+
+fn figures(
+    linear: &LinearPart,
+    runs: &[NlbenchRun],
+    best: &NlbenchRun,
+    smoothed: &[(f64, f64, f64)],
+    shown_steps: usize,
+) -> Vec<(&'static str, Figure)> {
+    let names = ["a", "b", "c", "d"];
+    let truth = abcd(&NlbenchParams::TRUE);
+    let iterations = runs.first().map_or(0, |r| r.trajectory.len());
+    let trajectories = (0..4)
+        .map(|p| {
+            let mut panel = Panel::new(format!("parameter {}", names[p]), "EM iteration", names[p]);
+            for run in runs {
+                let points = std::iter::once((0.0, abcd(&run.start)[p]))
+                    .chain(
+                        run.trajectory
+                            .iter()
+                            .enumerate()
+                            .map(|(k, v)| ((k + 1) as f64, v[p])),
+                    )
+                    .collect();
+                panel = panel.with_series(Curve::faint(points));
+            }
+            panel.with_series(
+                Curve::line(
+                    format!("true {} = {}", names[p], truth[p]),
+                    vec![(0.0, truth[p]), (iterations as f64, truth[p])],
+                )
+                .stroke(Stroke::Dashed)
+                .colour(6),
+            )
+        })
+        .collect();
+    let band: Vec<(f64, f64, f64)> = smoothed
+        .iter()
+        .take(shown_steps)
+        .enumerate()
+        .map(|(t, &(_, lo, hi))| (t as f64, lo, hi))
+        .collect();
+    let states = Panel::new(
+        format!(
+            "nlbench, run {} (highest final log-likelihood): smoothed state at its EM estimate",
+            best.run
+        ),
+        "time step t",
+        "state x(t)",
+    )
+    .with_band(Band {
+        name: "95 % smoothing band".into(),
+        points: band,
+        colour: 0,
+    })
+    .with_series(
+        Curve::line(
+            "smoothed mean",
+            smoothed
+                .iter()
+                .take(shown_steps)
+                .enumerate()
+                .map(|(t, s)| (t as f64, s.0))
+                .collect(),
+        )
+        .colour(0),
+    )
+    .with_series(
+        Curve::line(
+            "true state",
+            best.states
+                .iter()
+                .take(shown_steps)
+                .enumerate()
+                .map(|(t, &x)| (t as f64, x))
+                .collect(),
+        )
+        .stroke(Stroke::Dashed)
+        .colour(1),
+    );
+    let mut lti_trace = Panel::new("lti2x2: exact EM", "EM iteration", "log-likelihood");
+    for (k, row) in linear
+        .rows
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| !r.trace.is_empty())
+    {
+        // from the first iterate on: the starts are far below and would flatten the curve
+        let points = row
+            .trace
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(i, &l)| (i as f64, l))
+            .collect();
+        lti_trace = lti_trace.with_series(Curve::line(row.name, points).colour(k));
+    }
+    let longest = linear.rows.iter().map(|r| r.trace.len()).max().unwrap_or(1) as f64;
+    lti_trace = lti_trace.with_series(
+        Curve::line(
+            "truth",
+            vec![(1.0, linear.loglik_true), (longest, linear.loglik_true)],
+        )
+        .stroke(Stroke::Dashed)
+        .colour(6),
+    );
+    let mut particle_trace = Panel::new(
+        "nlbench: particle EM (estimates)",
+        "EM iteration",
+        "log-likelihood",
+    );
+    for run in runs {
+        // from the first iterate on, as above
+        let points = run
+            .em
+            .trace
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(i, &l)| (i as f64, l))
+            .collect();
+        particle_trace = particle_trace.with_series(Curve::faint(points));
+    }
+    vec![
+        ("em-trajectories", Figure::grid(trajectories, 2)),
+        ("bode", Figure::grid(bode_panels(&linear.rows), 2)),
+        ("smoothed-state", Figure::single(states)),
+        (
+            "loglik-trace",
+            Figure::grid(vec![lti_trace, particle_trace], 2),
+        ),
+    ]
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.digits$}"))
+}
+
+pub fn run(o: &Options) -> Result<(), CliError> {
+    let started = Instant::now();
+    let (dir, overwrite) = match &o.out_dir {
+        Some(dir) => (dir.clone(), o.force),
+        None => (PathBuf::from("sysid-demo"), true),
+    };
+    let paths: Vec<PathBuf> = FIGURES
+        .iter()
+        .flat_map(|stem| ["svg", "png"].map(|ext| dir.join(format!("{stem}.{ext}"))))
+        .collect();
+    crate::files::refuse_existing(paths.iter().map(PathBuf::as_path), overwrite)?;
+    let runs = o.runs.unwrap_or(if o.full { 200 } else { 16 });
+    let iterations = o.iters.unwrap_or(if o.full { 1000 } else { 200 });
+    if runs == 0 || iterations == 0 {
+        return Err(CliError::BadOption {
+            option: "--runs/--iters",
+            message: "must be at least 1".into(),
+        });
+    }
+    note(&format!(
+        "sysid demo: seed-004 system (N4SID, then EM), then {runs} particle-EM runs x {iterations} iterations; figures in {}",
+        dir.display()
+    ));
+    let linear = linear_part(o.seed, o.json)?;
+    let linear_seconds = started.elapsed().as_secs_f64();
+    let study = NlbenchStudy {
+        seed: o.seed,
+        iterations,
+        noise: NoiseSetting::Known,
+        ..NlbenchStudy::default()
+    };
+    let t0 = Instant::now();
+    let results = particle_part(&study, runs, o.json)?;
+    let particle_seconds = t0.elapsed().as_secs_f64();
+    let best = best_run(&results);
+    let smoothed = smoothed_state(best, o.seed)?;
+    std::fs::create_dir_all(&dir).map_err(|source| CliError::Io {
+        path: dir.clone(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    for (stem, figure) in figures(&linear, &results, best, &smoothed, 100) {
+        written.extend(figure.write(&dir, stem, overwrite)?);
+    }
+    let total = started.elapsed().as_secs_f64();
+    report(
+        o,
+        &linear,
+        &results,
+        &Timings {
+            linear_seconds,
+            particle_seconds,
+            total,
+        },
+        &written,
+    );
+    Ok(())
+}
+
+struct Timings {
+    linear_seconds: f64,
+    particle_seconds: f64,
+    total: f64,
+}
+
+fn report(
+    o: &Options,
+    linear: &LinearPart,
+    results: &[NlbenchRun],
+    t: &Timings,
+    written: &[PathBuf],
+) {
+    let names = ["a", "b", "c", "d"];
+    let truth = abcd(&NlbenchParams::TRUE);
+    let column = |p: usize| {
+        results
+            .iter()
+            .map(|r| abcd(&r.estimate)[p])
+            .collect::<Vec<f64>>()
+    };
+    let converged = results
+        .iter()
+        .filter(|r| within_ten_percent(&r.estimate))
+        .count();
+    let seconds_per_run = median(results.iter().map(|r| r.em.elapsed.as_secs_f64()).collect());
+    let iterations = results.first().map_or(0, |r| r.trajectory.len());
+    if o.json {
+        let rows: Vec<serde_json::Value> = linear
+            .rows
+            .iter()
+            .map(|r| serde_json::json!({"model": r.name, "loglik": r.loglik, "response_error": r.response_error,
+                "iterations": r.iterations, "seconds": r.seconds}))
+            .collect();
+        let estimates: serde_json::Map<String, serde_json::Value> = (0..4)
+            .map(|p| {
+                (
+                    names[p].to_string(),
+                    serde_json::json!({"truth": truth[p], "median": median(column(p))}),
+                )
+            })
+            .collect();
+        crate::say(&serde_json::json!({
+            "command": "demo",
+            "lti2x2": {"T": LTI_STEPS, "loglik_true": linear.loglik_true, "models": rows},
+            "nlbench_em": {"runs": results.len(), "iterations": iterations, "T": NlbenchStudy::default().steps,
+                "M": NlbenchStudy::default().particles, "smoother": "tanizaki", "estimates": estimates,
+                "within_10_percent": converged, "seconds_per_run_median": seconds_per_run,
+                "seconds": t.particle_seconds},
+            "figures": written, "seconds": t.total,
+        }).to_string());
+        return;
+    }
+    let mut out = Vec::new();
+    out.push(format!("seed 004: lti2x2 (2 inputs, 2 outputs, 8 states), T = {LTI_STEPS}: N4SID, then exact EM ({:.1} s)", t.linear_seconds));
+    out.push(format!(
+        "  {:<26} {:>15} {:>15} {:>11} {:>9}",
+        "model", "log-likelihood", "response error", "iterations", "time (s)"
+    ));
+    for r in &linear.rows {
+        out.push(format!(
+            "  {:<26} {:>15} {:>15} {:>11} {:>9}",
+            r.name,
+            opt(r.loglik, 2),
+            opt(r.response_error, 3),
+            r.iterations.map_or("-".into(), |k| k.to_string()),
+            if r.seconds > 0.0 {
+                format!("{:.3}", r.seconds)
+            } else {
+                "-".into()
+            },
+        ));
+    }
+    out.push(
+        "  (response error: relative frequency-response error against the truth, 512 frequencies)"
+            .into(),
+    );
+    out.push(String::new());
+    let study = NlbenchStudy::default();
+    out.push(format!(
+        "seed 000: nlbench particle EM, {} runs x {iterations} iterations, T = {}, M = {}, Tanizaki smoother ({:.1} s)",
+        results.len(), study.steps, study.particles, t.particle_seconds
+    ));
+    out.push(format!(
+        "  {:<10} {:>8} {:>9} {:>9} {:>9} {:>9}",
+        "parameter", "truth", "start", "median", "q25", "q75"
+    ));
+    for p in 0..4 {
+        let mut v = column(p);
+        v.sort_by(f64::total_cmp);
+        let q = |f: f64| v[((f * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
+        let start = median(results.iter().map(|r| abcd(&r.start)[p]).collect());
+        out.push(format!(
+            "  {:<10} {:>8} {:>9} {:>9} {:>9} {:>9}",
+            names[p],
+            fmt(truth[p]),
+            format!("{start:.4}"),
+            format!("{:.4}", median(v.clone())),
+            format!("{:.4}", q(0.25)),
+            format!("{:.4}", q(0.75))
+        ));
+    }
+    out.push(format!(
+        "  runs with every estimate within 10 % of the truth: {converged}/{}; median {:.1} s per run, {} threads",
+        results.len(),
+        seconds_per_run,
+        crate::threads()
+    ));
+    if !o.full {
+        out.push(
+            "  (reduced scale; `sysid demo --full` runs the paper's 200 runs x 1000 iterations)"
+                .into(),
+        );
+    }
+    out.push(String::new());
+    out.push(format!(
+        "figures ({}):",
+        written
+            .first()
+            .and_then(|p| p.parent())
+            .unwrap_or(Path::new("."))
+            .display()
+    ));
+    for pair in written.chunks(2) {
+        let names: Vec<String> = pair
+            .iter()
+            .filter_map(|p| p.file_name())
+            .map(|n| n.to_string_lossy().into_owned())
+            .collect();
+        out.push(format!("  {}", names.join(", ")));
+    }
+    out.push(format!("total {:.1} s", t.total));
+    crate::say(&out.join("\n"));
+}

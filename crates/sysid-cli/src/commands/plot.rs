@@ -1,0 +1,337 @@
+//! `sysid plot`: figures from the files sysid writes.
+//!
+//! | file | recognised by | figure |
+//! | --- | --- | --- |
+//! | EM trace (`fit --trace`) | columns `iteration, loglik, ...` | log-likelihood, and one panel per parameter column |
+//! | model (`fit`, `n4sid`, `simulate --model-out`) | `.json` | Bode magnitude of every input-output channel, one curve per model |
+//! | states (`smooth`, `filter`, `psmooth`, `pf`) | columns `t, x1.., [x1_sd..]` | each state with a 95 % band (mean +- 1.96 sd), against `--truth` |
+//! | data (`simulate`) | columns `t, u.., y..` | each column against t |
+//!
+//! Figures are `<out-dir>/<file stem>-<kind>.svg` and `.png`; the models together give
+//! `<out-dir>/bode.svg` and `.png`.
+
+use crate::error::CliError;
+use crate::files::{read_columns, read_model};
+use std::path::{Path, PathBuf};
+use sysid::kalman::LinearGaussianModel;
+use sysid_plot::{Band, Figure, Panel, Scale, Series, Stroke};
+
+/// Options of `sysid plot`.
+#[derive(clap::Args, Debug)]
+pub struct Options {
+    /// Files written by sysid: EM traces, models (JSON), states, data (CSV).
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// What the files are: auto (from their content), trace, bode, states or data.
+    #[arg(long, default_value = "auto")]
+    pub kind: String,
+    /// States: a data file with the true states (columns x1, x2, ...; `simulate`
+    /// writes them) to draw against the estimates.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Directory for the figures (created if missing).
+    #[arg(long, default_value = ".")]
+    pub out_dir: PathBuf,
+    /// Replace existing figures.
+    #[arg(long)]
+    pub force: bool,
+    /// Print the written files as one JSON line.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Trace,
+    Bode,
+    States,
+    Data,
+}
+
+impl Kind {
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Trace => "trace",
+            Kind::Bode => "bode",
+            Kind::States => "states",
+            Kind::Data => "data",
+        }
+    }
+}
+
+fn bad(message: String) -> CliError {
+    CliError::BadOption {
+        option: "plot",
+        message,
+    }
+}
+
+/// The kind of a file: by `--kind`, else JSON = model, else by the CSV header.
+fn kind_of(path: &Path, requested: &str) -> Result<Kind, CliError> {
+    let kind = match requested {
+        "trace" => Kind::Trace,
+        "bode" => Kind::Bode,
+        "states" => Kind::States,
+        "data" => Kind::Data,
+        "auto" => {
+            if path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+            {
+                return Ok(Kind::Bode);
+            }
+            let (header, _) = crate::files::read_rows(path)?;
+            if header.first().is_some_and(|h| h == "iteration")
+                && header.iter().any(|h| h == "loglik")
+            {
+                Kind::Trace
+            } else if header.iter().any(|h| h.ends_with("_sd"))
+                || (header.iter().any(|h| h == "x1") && !header.iter().any(|h| h.starts_with('y')))
+            {
+                Kind::States
+            } else {
+                Kind::Data
+            }
+        }
+        other => {
+            return Err(CliError::BadOption {
+                option: "--kind",
+                message: format!("unknown kind {other:?} (known: auto, trace, bode, states, data)"),
+            });
+        }
+    };
+    Ok(kind)
+}
+
+fn column<'a>(header: &[String], columns: &'a [Vec<f64>], name: &str) -> Option<&'a Vec<f64>> {
+    header.iter().position(|h| h == name).map(|i| &columns[i])
+}
+
+/// x values: the `t` or `iteration` column, else 1, 2, ...
+fn abscissa(header: &[String], columns: &[Vec<f64>], name: &str) -> Vec<f64> {
+    column(header, columns, name).cloned().unwrap_or_else(|| {
+        (1..=columns.first().map_or(0, Vec::len))
+            .map(|k| k as f64)
+            .collect()
+    })
+}
+
+fn trace_figure(path: &Path) -> Result<Figure, CliError> {
+    let (header, columns) = read_columns(path)?;
+    let x = abscissa(&header, &columns, "iteration");
+    let mut panels = Vec::new();
+    for (name, values) in header
+        .iter()
+        .zip(&columns)
+        .filter(|(h, _)| *h != "iteration")
+    {
+        let points = x.iter().copied().zip(values.iter().copied()).collect();
+        let y_label = if name == "loglik" {
+            "log-likelihood"
+        } else {
+            name.as_str()
+        };
+        panels.push(
+            Panel::new(
+                if name == "loglik" {
+                    "log-likelihood".to_string()
+                } else {
+                    format!("parameter {name}")
+                },
+                "EM iteration",
+                y_label,
+            )
+            .with_series(Series::line(name.clone(), points).unnamed()),
+        );
+    }
+    let columns = if panels.len() > 1 { 2 } else { 1 };
+    Ok(Figure::grid(panels, columns))
+}
+
+fn states_figure(path: &Path, truth: Option<&Path>) -> Result<Figure, CliError> {
+    let (header, columns) = read_columns(path)?;
+    let t = abscissa(&header, &columns, "t");
+    let truth = truth.map(read_columns).transpose()?;
+    let mut panels = Vec::new();
+    for i in 1.. {
+        let name = format!("x{i}");
+        let Some(mean) = column(&header, &columns, &name) else {
+            break;
+        };
+        let mut panel = Panel::new(format!("state {name}"), "t", name.clone());
+        if let Some(sd) = column(&header, &columns, &format!("{name}_sd")) {
+            let band = t
+                .iter()
+                .zip(mean)
+                .zip(sd)
+                .map(|((&t, &m), &s)| (t, m - 1.96 * s, m + 1.96 * s))
+                .collect();
+            panel = panel.with_band(Band {
+                name: "95 % band".into(),
+                points: band,
+                colour: 0,
+            });
+        }
+        panel = panel.with_series(
+            Series::line(
+                "estimate",
+                t.iter().copied().zip(mean.iter().copied()).collect(),
+            )
+            .colour(0),
+        );
+        if let Some((th, tc)) = &truth
+            && let Some(x) = column(th, tc, &name)
+        {
+            let tt = abscissa(th, tc, "t");
+            panel = panel.with_series(
+                Series::line(
+                    "true state",
+                    tt.into_iter().zip(x.iter().copied()).collect(),
+                )
+                .stroke(Stroke::Dashed)
+                .colour(1),
+            );
+        }
+        panels.push(panel);
+    }
+    if panels.is_empty() {
+        return Err(bad(format!(
+            "{}: no state columns (x1, x2, ...)",
+            path.display()
+        )));
+    }
+    let columns = if panels.len() > 1 { 2 } else { 1 };
+    Ok(Figure::grid(panels, columns))
+}
+
+fn data_figure(path: &Path) -> Result<Figure, CliError> {
+    let (header, columns) = read_columns(path)?;
+    let t = abscissa(&header, &columns, "t");
+    let panels: Vec<Panel> = header
+        .iter()
+        .zip(&columns)
+        .filter(|(h, _)| *h != "t")
+        .map(|(name, values)| {
+            Panel::new(name.clone(), "t", name.clone()).with_series(
+                Series::line(
+                    name.clone(),
+                    t.iter().copied().zip(values.iter().copied()).collect(),
+                )
+                .unnamed(),
+            )
+        })
+        .collect();
+    if panels.is_empty() {
+        return Err(bad(format!("{}: no columns besides t", path.display())));
+    }
+    let columns = if panels.len() > 1 { 2 } else { 1 };
+    Ok(Figure::grid(panels, columns))
+}
+
+/// Bode magnitudes of every channel, one curve per model.
+fn bode_figure(models: &[(String, LinearGaussianModel)]) -> Result<Figure, CliError> {
+    let (p, m) = (models[0].1.p(), models[0].1.m());
+    for (name, model) in models {
+        if model.p() != p || model.m() != m {
+            return Err(bad(format!(
+                "{name}: {} outputs and {} inputs, but {} has {p} and {m}",
+                model.p(),
+                model.m(),
+                models[0].0
+            )));
+        }
+    }
+    if m == 0 {
+        return Err(bad(
+            "the models have no inputs: there is no frequency response to draw".into(),
+        ));
+    }
+    let grid: Vec<f64> = (0..240)
+        .map(|k| std::f64::consts::PI * 10f64.powf(-2.5 + 2.5 * k as f64 / 239.0))
+        .collect();
+    let mut panels = Vec::new();
+    for i in 0..p {
+        for j in 0..m {
+            let mut panel = Panel::new(
+                format!(
+                    "G{}{} (input u{} to output y{})",
+                    i + 1,
+                    j + 1,
+                    j + 1,
+                    i + 1
+                ),
+                "frequency (rad/sample)",
+                "magnitude (dB)",
+            )
+            .scales(Scale::Log, Scale::Linear);
+            for (name, model) in models {
+                let points = grid
+                    .iter()
+                    .map(|&w| {
+                        (
+                            w,
+                            model
+                                .frequency_response(w)
+                                .map_or(f64::NAN, |g| 20.0 * g[(i, j)].norm().log10()),
+                        )
+                    })
+                    .collect();
+                panel = panel.with_series(Series::line(name.clone(), points));
+            }
+            panels.push(panel);
+        }
+    }
+    let columns = m.min(3);
+    Ok(Figure::grid(panels, columns))
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map_or("figure".into(), |s| s.to_string_lossy().into_owned())
+}
+
+pub fn run(o: &Options) -> Result<(), CliError> {
+    let mut jobs: Vec<(String, Figure)> = Vec::new();
+    let mut models = Vec::new();
+    for path in &o.files {
+        match kind_of(path, &o.kind)? {
+            Kind::Bode => models.push((stem(path), read_model(path)?)),
+            kind => {
+                let figure = match kind {
+                    Kind::Trace => trace_figure(path)?,
+                    Kind::States => states_figure(path, o.truth.as_deref())?,
+                    _ => data_figure(path)?,
+                };
+                jobs.push((format!("{}-{}", stem(path), kind.name()), figure));
+            }
+        }
+    }
+    if !models.is_empty() {
+        jobs.push(("bode".into(), bode_figure(&models)?));
+    }
+    let targets: Vec<PathBuf> = jobs
+        .iter()
+        .flat_map(|(stem, _)| ["svg", "png"].map(|ext| o.out_dir.join(format!("{stem}.{ext}"))))
+        .collect();
+    crate::files::refuse_existing(targets.iter().map(PathBuf::as_path), o.force)?;
+    std::fs::create_dir_all(&o.out_dir).map_err(|source| CliError::Io {
+        path: o.out_dir.clone(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    for (stem, figure) in &jobs {
+        written.extend(figure.write(&o.out_dir, stem, o.force)?);
+    }
+    crate::report(
+        o.json,
+        serde_json::json!({"command": "plot", "figures": written}),
+        || {
+            written
+                .iter()
+                .map(|p| format!("wrote {}", p.display()))
+                .collect::<Vec<_>>()
+                .join("\n")
+        },
+    );
+    Ok(())
+}

@@ -1,0 +1,90 @@
+//! Progress bars on stderr (indicatif) for anything that runs longer than about a
+//! second. Hidden under `--quiet` and `--json`, and when stderr is not a terminal, so
+//! scripts and logs see only results.
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressFinish, ProgressStyle};
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+use sysid::em::{EmObserver, IterationInfo};
+
+static QUIET: AtomicBool = AtomicBool::new(false);
+
+/// Sets the global `--quiet`.
+pub fn set_quiet(quiet: bool) {
+    QUIET.store(quiet, Ordering::Relaxed);
+}
+
+/// Whether `--quiet` was given.
+pub fn quiet() -> bool {
+    QUIET.load(Ordering::Relaxed)
+}
+
+/// A progress bar, or nothing when progress is not to be shown.
+#[derive(Clone)]
+pub struct Progress {
+    bar: Option<ProgressBar>,
+}
+
+impl Progress {
+    /// A bar of `total` steps labelled `label`; hidden under `--quiet`, `json`, or when
+    /// stderr is not a terminal.
+    pub fn new(total: u64, label: &str, json: bool) -> Progress {
+        if json || quiet() || !std::io::stderr().is_terminal() {
+            return Progress { bar: None };
+        }
+        // cleared when the last clone is dropped, also on an early error return
+        let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+            .with_finish(ProgressFinish::AndClear);
+        let style = ProgressStyle::with_template(
+            "{prefix:>12} [{bar:32}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
+        )
+        .map(|s| s.progress_chars("=> "))
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+        bar.set_style(style);
+        bar.set_prefix(label.to_string());
+        Progress { bar: Some(bar) }
+    }
+
+    /// Advances by `n` steps.
+    pub fn inc(&self, n: u64) {
+        if let Some(bar) = &self.bar {
+            bar.inc(n);
+        }
+    }
+
+    /// Shows `message` after the counts.
+    pub fn message(&self, message: String) {
+        if let Some(bar) = &self.bar {
+            bar.set_message(message);
+        }
+    }
+
+    /// Removes the bar.
+    pub fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+impl<T> EmObserver<T> for Progress {
+    fn iteration(&mut self, info: &IterationInfo<'_, T>) {
+        self.inc(1);
+        if info.loglik.is_finite() {
+            self.message(format!("loglik {:.3}", info.loglik));
+        }
+    }
+}
+
+impl sysid::pmcmc::ChainObserver for Progress {
+    fn iteration(&self, _chain: usize, _iteration: usize) {
+        self.inc(1);
+    }
+}
+
+/// Prints a note on stderr unless `--quiet`.
+pub fn note(text: &str) {
+    if !quiet() {
+        eprintln!("{text}");
+    }
+}

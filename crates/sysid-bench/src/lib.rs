@@ -10,8 +10,6 @@
 //! cargo run --release -p sysid-bench -- wiener [--runs 100 --iters 100 --particles 100 --csv-dir out/]
 //! ```
 
-#![warn(missing_docs)]
-
 mod em;
 mod kalman;
 mod lti2x2;

@@ -94,7 +94,12 @@ pub enum OptionsError {
     NoIterations,
     /// A tolerance is negative or not finite.
     #[error("{name} must be a finite non-negative number, got {value}")]
-    BadTolerance { name: &'static str, value: f64 },
+    BadTolerance {
+        /// The matrix (or option) concerned.
+        name: &'static str,
+        /// The offending value.
+        value: f64,
+    },
 }
 
 impl EmOptions {

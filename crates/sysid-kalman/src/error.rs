@@ -12,19 +12,29 @@ pub enum KalmanError {
     /// A model matrix or a data array has the wrong shape.
     #[error("matrix {name} must be {expected_rows}x{expected_cols}, got {rows}x{cols}")]
     Dimension {
+        /// The matrix (or option) concerned.
         name: String,
+        /// Rows expected.
         expected_rows: usize,
+        /// Columns expected.
         expected_cols: usize,
+        /// Rows found.
         rows: usize,
+        /// Columns found.
         cols: usize,
     },
     /// An infinite output, or a NaN/Inf input (NaN outputs mean "missing").
     #[error("record {record}, time {time}: {what} {index} is {value}")]
     NonFiniteData {
+        /// Record index (0-based).
         record: usize,
+        /// Time index (0-based).
         time: usize,
+        /// What the value is (`input` or `output`).
         what: &'static str,
+        /// Component of the vector (0-based).
         index: usize,
+        /// The offending value.
         value: f64,
     },
     /// The innovation covariance `C P C' + R` is singular at this step, so the
@@ -33,18 +43,27 @@ pub enum KalmanError {
         "record {record}, time {time}: innovation covariance is singular (output {output} is exactly predictable)"
     )]
     SingularInnovation {
+        /// Record index (0-based).
         record: usize,
+        /// Time index (0-based).
         time: usize,
+        /// Output index (0-based).
         output: usize,
     },
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]
-    EmptyRecord { record: usize },
+    EmptyRecord {
+        /// Record index (0-based).
+        record: usize,
+    },
     /// Inputs and outputs of one record disagree in length.
     #[error("record {record}: inputs have {input_steps} steps but outputs have {output_steps}")]
     LengthMismatch {
+        /// Record index (0-based).
         record: usize,
+        /// Time steps of the inputs.
         input_steps: usize,
+        /// Time steps of the outputs.
         output_steps: usize,
     },
 }

@@ -3,11 +3,27 @@
 //! statistics.
 //!
 //! # Model
-//! ```text
-//! x_{t+1} = A x_t + B u_t + w_t
-//! y_t     = C x_t + D u_t + h + e_t
-//! [w_t; e_t] ~ N(0, [[Q, S], [S', R]]),   x_1 ~ N(mu, P1)
-//! ```
+//! $$
+//! x_{t+1} = A x_t + B u_t + w_t, \qquad y_t = C x_t + D u_t + h + e_t,
+//! $$
+//! $$
+//! \begin{bmatrix} w_t \\ e_t \end{bmatrix} \sim
+//! \mathcal N\left(0, \begin{bmatrix} Q & S \\ S^\top & R \end{bmatrix}\right),
+//! \qquad x_1 \sim \mathcal N(\mu, P_1).
+//! $$
+//!
+//! # Algorithm
+//! One Householder triangularisation per step of the pre-array
+//! $\begin{bmatrix} U C^\top & U A^\top & U \\ L_e & L_w & 0 \end{bmatrix}$, with
+//! $U^\top U = P_{t|t-1}$ and $L^\top L$ the noise covariance, gives the innovation
+//! factor, the gain and the next predicted factor: every covariance is a product
+//! $L^\top L$, symmetric and positive semi-definite by construction. The
+//! log-likelihood is $\sum_t \log \mathcal N(y_t; \hat y_{t|t-1}, \Sigma_t)$ with
+//! $\log\det \Sigma_t$ from the factor's diagonal.
+//!
+//! # Complexity
+//! $O(T (n + p)^3)$ time for $T$ steps, $n$ states and $p$ outputs; the smoother keeps
+//! $O(T n^2)$ memory, the filter's log-likelihood $O(n^2)$.
 //! Missing outputs are NaN entries (partially observed vectors and wholly missing steps
 //! are both fine).
 //!

@@ -34,7 +34,6 @@
 //! # References
 //! The figures follow those of the seed documents: EM parameter trajectories (seed
 //! 000, Figure 1) and Bode magnitudes of the initial, subspace and EM models (seed 004).
-#![warn(missing_docs)]
 
 mod draw;
 mod output;

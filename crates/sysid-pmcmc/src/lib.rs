@@ -1,5 +1,5 @@
 //! Bayesian identification of state-space models: particle marginal
-//! Metropolis-Hastings ([`pmmh`]) and particle Gibbs ([`particle_gibbs`]) with
+//! Metropolis-Hastings ([`pmmh()`]) and particle Gibbs ([`particle_gibbs`]) with
 //! backward simulation or ancestor sampling, with priors, several chains in parallel
 //! and convergence diagnostics.
 //!

@@ -5,7 +5,7 @@
 //! `p(theta | y)`.
 //!
 //! # Algorithm
-//! A Gaussian random walk on the unconstrained parameters `z` (see [`Support`]):
+//! A Gaussian random walk on the unconstrained parameters `z` (see [`Support`](crate::Support)):
 //! `z* = z + L e`, `e ~ N(0, I)`. The intractable likelihood is replaced by the
 //! bootstrap filter's estimate `p^(y | theta*)`, which is unbiased, so the chain
 //! targets the exact posterior (Andrieu, Doucet and Holenstein 2010). Accept with

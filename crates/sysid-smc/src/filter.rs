@@ -1,7 +1,7 @@
 //! The bootstrap particle filter.
 //!
 //! # Model
-//! Any [`FilterModel`](crate::FilterModel): `x_0 ~ mu`, `x_{t+1} ~ f(. | x_t)`,
+//! Any [`FilterModel`]: `x_0 ~ mu`, `x_{t+1} ~ f(. | x_t)`,
 //! `y_t ~ g(. | x_t)`.
 //!
 //! # Algorithm

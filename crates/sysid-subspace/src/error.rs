@@ -10,15 +10,21 @@ pub enum SubspaceError {
         "order {order} is larger than the data allow with {block_rows} block rows (at most {max})"
     )]
     OrderTooLarge {
+        /// The requested order.
         order: usize,
+        /// Block rows of the Hankel matrices.
         block_rows: usize,
+        /// The largest order the data allow.
         max: usize,
     },
     /// Not enough samples for the number of block rows.
     #[error("{block_rows} block rows need at least {needed} samples, the data have {got}")]
     TooFewSamples {
+        /// Block rows of the Hankel matrices.
         block_rows: usize,
+        /// Samples needed.
         needed: usize,
+        /// Samples available.
         got: usize,
     },
     /// Fewer than two block rows, or zero order.
@@ -28,7 +34,12 @@ pub enum SubspaceError {
     #[error(
         "output {output} is missing at time {time}: N4SID needs complete data (fill or cut the gaps, or start EM from another model)"
     )]
-    MissingData { time: usize, output: usize },
+    MissingData {
+        /// Time index (0-based).
+        time: usize,
+        /// Output index (0-based).
+        output: usize,
+    },
     /// The data have no outputs.
     #[error("the data have no output")]
     NoOutputs,

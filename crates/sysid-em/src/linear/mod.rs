@@ -62,7 +62,9 @@ pub enum LinearEmError {
     /// The starting model is outside the parameter set of the spec.
     #[error("initial model: {matrix} {reason}")]
     InitialNotInSpec {
+        /// The matrix concerned.
         matrix: &'static str,
+        /// Why it is refused.
         reason: &'static str,
     },
 }

@@ -42,7 +42,7 @@ pub(super) fn structured(
 /// [`LinearEmError::Unsupported`] when `Q` or `R` is estimated while the model has a
 /// non-zero fixed `S`, or when the conditional route meets a singular noise covariance;
 /// [`LinearEmError::InvalidSpec`]; [`LinearEmError::NoSteps`] for empty statistics;
-/// [`LinearEmError::Model`] if the new model fails validation (it should not).
+/// [`LinearEmError::Kalman`] if the new model fails validation (it should not).
 pub fn m_step(
     model: &LinearGaussianModel,
     stats: &SufficientStatistics,

@@ -16,6 +16,12 @@ pub enum CliError {
     Plot(sysid_plot::PlotError),
     #[error("{path}: the file is empty (expected a header line)")]
     EmptyFile { path: PathBuf },
+    #[error("{path}, line 1: column {position} repeats the name {column:?}")]
+    DuplicateColumn {
+        path: PathBuf,
+        column: String,
+        position: usize,
+    },
     #[error("{path}: no data rows after the header")]
     NoRows { path: PathBuf },
     #[error("{path}, line {line}: expected {expected} fields as in the header, found {found}")]
@@ -124,7 +130,17 @@ impl CliError {
             )
         };
         let bad_input = match self {
-            CliError::Io { .. } | CliError::Kalman { .. } => false,
+            CliError::Io { .. } => false,
+            // the data or the model is at fault, not the computation
+            CliError::Kalman { source, .. } => matches!(
+                source,
+                KalmanError::NonFiniteData { .. }
+                    | KalmanError::Overflow { .. }
+                    | KalmanError::Dimension { .. }
+                    | KalmanError::EmptyRecord { .. }
+                    | KalmanError::LengthMismatch { .. }
+                    | KalmanError::Matrix(_)
+            ),
             CliError::Plot(e) => !matches!(
                 e,
                 sysid_plot::PlotError::Io { .. } | sysid_plot::PlotError::Draw { .. }

@@ -66,7 +66,12 @@ pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let spec: ModelSpec = serde_json::from_str(&text).map_err(|e| json_error(path, "model", &e))?;
+    parse_model(&text, path)
+}
+
+/// Parses and validates the text of a model file; errors name `path`.
+pub fn parse_model(text: &str, path: &Path) -> Result<LinearGaussianModel, CliError> {
+    let spec: ModelSpec = serde_json::from_str(text).map_err(|e| json_error(path, "model", &e))?;
     spec.build().map_err(|source| CliError::Model {
         path: path.to_path_buf(),
         source,
@@ -135,6 +140,14 @@ pub fn read_rows(path: &Path) -> Result<(Vec<String>, Vec<NumberedRow>), CliErro
         path: path.to_path_buf(),
         source,
     })?;
+    parse_rows(file, path)
+}
+
+/// [`read_rows`] on the bytes of `reader`; errors name `path`.
+pub fn parse_rows(
+    file: impl std::io::Read,
+    path: &Path,
+) -> Result<(Vec<String>, Vec<NumberedRow>), CliError> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
@@ -153,9 +166,25 @@ pub fn read_rows(path: &Path) -> Result<(Vec<String>, Vec<NumberedRow>), CliErro
         }
         Some(r) => r.map_err(csv_err)?.iter().map(str::to_string).collect(),
     };
+    // a byte-order mark (spreadsheet exports) is not part of the first name
+    let mut header = header;
+    if let Some(first) = header.first_mut() {
+        *first = first.trim_start_matches('\u{feff}').trim().to_string();
+    }
     if header.iter().all(String::is_empty) {
         return Err(CliError::EmptyFile {
             path: path.to_path_buf(),
+        });
+    }
+    if let Some((i, name)) = header
+        .iter()
+        .enumerate()
+        .find(|(i, h)| header[..*i].contains(h))
+    {
+        return Err(CliError::DuplicateColumn {
+            path: path.to_path_buf(),
+            column: name.clone(),
+            position: i + 1,
         });
     }
     let mut rows = Vec::new();
@@ -210,7 +239,20 @@ pub fn read_columns(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>), CliErro
 /// missing; input cells must be finite numbers. Errors name the file, the line
 /// (1-based, the header is line 1) and the column.
 pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliError> {
-    let (header, rows) = read_rows(path)?;
+    let file = File::open(path).map_err(|source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_data(file, path, choice)
+}
+
+/// [`read_data`] on the bytes of `reader`; errors name `path`.
+pub fn parse_data(
+    reader: impl std::io::Read,
+    path: &Path,
+    choice: &ColumnChoice,
+) -> Result<DataFile, CliError> {
+    let (header, rows) = parse_rows(reader, path)?;
     let input_cols = select(path, &header, &choice.inputs, 'u')?;
     let output_cols = select(path, &header, &choice.outputs, 'y')?;
     let time_col = header.iter().position(|h| h == "t");

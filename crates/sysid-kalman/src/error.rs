@@ -2,7 +2,7 @@ use sysid_linalg::LinalgError;
 use thiserror::Error;
 
 /// Errors of the linear Gaussian layer. Each variant names the place: the matrix, or
-/// the record and time index (1-based, as in the equations).
+/// the record (0-based) and the time step and component (1-based, as in the equations).
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum KalmanError {
@@ -28,11 +28,11 @@ pub enum KalmanError {
     NonFiniteData {
         /// Record index (0-based).
         record: usize,
-        /// Time index (0-based).
+        /// Time step (1-based).
         time: usize,
         /// What the value is (`input` or `output`).
         what: &'static str,
-        /// Component of the vector (0-based).
+        /// Component of the vector (1-based).
         index: usize,
         /// The offending value.
         value: f64,
@@ -45,10 +45,21 @@ pub enum KalmanError {
     SingularInnovation {
         /// Record index (0-based).
         record: usize,
-        /// Time index (0-based).
+        /// Time step (1-based).
         time: usize,
-        /// Output index (0-based).
+        /// Output (1-based).
         output: usize,
+    },
+    /// The log-likelihood or the state estimate overflows at this step: an output far
+    /// outside the model's scale (e.g. 1e308 with unit noise).
+    #[error(
+        "record {record}, time {time}: the log-likelihood overflows (an output far outside the model's scale?)"
+    )]
+    Overflow {
+        /// Record index (0-based).
+        record: usize,
+        /// Time step (1-based).
+        time: usize,
     },
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]

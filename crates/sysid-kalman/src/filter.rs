@@ -372,6 +372,12 @@ impl KalmanWorkspace {
                     });
                 }
                 let w = e / diag;
+                if !w.is_finite() {
+                    return Err(KalmanError::Overflow {
+                        record: record_index,
+                        time: t + 1,
+                    });
+                }
                 self.eps[j] = w;
                 quad_sum += w * w;
                 logdet.push(diag);

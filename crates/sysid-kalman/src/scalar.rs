@@ -26,6 +26,23 @@ pub(crate) fn loglik(
     record_index: usize,
     reuse_steady_state: bool,
 ) -> Result<f64> {
+    let loglik = loglik_pass::<false>(model, record, record_index, reuse_steady_state)?;
+    if loglik.is_finite() {
+        return Ok(loglik);
+    }
+    // rare: find the step where it overflowed (a second pass that checks every step,
+    // kept off the fast path)
+    loglik_pass::<true>(model, record, record_index, reuse_steady_state)
+}
+
+/// One pass of the recursion; with `LOCATE_OVERFLOW` every step is checked and the
+/// first non-finite term is reported with its time.
+fn loglik_pass<const LOCATE_OVERFLOW: bool>(
+    model: &LinearGaussianModel,
+    record: &Record,
+    record_index: usize,
+    reuse_steady_state: bool,
+) -> Result<f64> {
     let m = model.m();
     let (a, c, q, r, s, h) = (
         model.a()[(0, 0)],
@@ -82,9 +99,23 @@ pub(crate) fn loglik(
         let z = yt - dot(d, ut) - h; // y - d u - h
         let e = z - c * x;
         quad += e * e * inv;
+        if LOCATE_OVERFLOW && !(quad.is_finite() && x.is_finite()) {
+            return Err(KalmanError::Overflow {
+                record: record_index,
+                time: t + 1,
+            });
+        }
         logdet.push(ss);
         observed += 1;
         x = x_coef * x + z_coef * z + bu;
     }
-    Ok(-0.5 * (observed as f64) * LN_2PI - 0.5 * logdet.ln() - 0.5 * quad)
+    let loglik = -0.5 * (observed as f64) * LN_2PI - 0.5 * logdet.ln() - 0.5 * quad;
+    if LOCATE_OVERFLOW && !loglik.is_finite() {
+        // every step's term was finite but their sum is not
+        return Err(KalmanError::Overflow {
+            record: record_index,
+            time: y.len(),
+        });
+    }
+    Ok(loglik)
 }

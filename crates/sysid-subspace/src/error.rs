@@ -35,9 +35,9 @@ pub enum SubspaceError {
         "output {output} is missing at time {time}: N4SID needs complete data (fill or cut the gaps, or start EM from another model)"
     )]
     MissingData {
-        /// Time index (0-based).
+        /// Time step (1-based).
         time: usize,
-        /// Output index (0-based).
+        /// Output (1-based).
         output: usize,
     },
     /// The data have no outputs.

@@ -35,6 +35,12 @@ pub struct Options {
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    if o.steps == 0 {
+        return Err(CliError::BadOption {
+            option: "--steps",
+            message: "must be at least 1".into(),
+        });
+    }
     if o.system == "nlbench" {
         return run_nlbench(o);
     }

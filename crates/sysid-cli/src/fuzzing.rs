@@ -1,0 +1,41 @@
+//! Entry points for the fuzz targets (`fuzz/`): the command line's parsers on arbitrary
+//! input. Each returns the one-line error a user would see, and must never panic.
+
+use std::path::Path;
+
+/// Parses `bytes` as a data file (CSV, default columns) into a record.
+pub fn parse_data_file(bytes: &[u8]) -> Result<(), String> {
+    crate::files::parse_data(
+        bytes,
+        Path::new("fuzz.csv"),
+        &crate::files::ColumnChoice::default(),
+    )
+    .map(|_| ())
+    .map_err(|e| e.to_string())
+}
+
+/// Parses `bytes` as a numeric table (what `sysid plot` reads).
+pub fn parse_table(bytes: &[u8]) -> Result<(), String> {
+    let (header, rows) =
+        crate::files::parse_rows(bytes, Path::new("fuzz.csv")).map_err(|e| e.to_string())?;
+    for (_, row) in rows {
+        debug_assert_eq!(row.len(), header.len());
+    }
+    Ok(())
+}
+
+/// Parses and validates `text` as a model file (JSON).
+pub fn parse_model_file(text: &str) -> Result<(), String> {
+    crate::files::parse_model(text, Path::new("fuzz.json"))
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
+/// Parses a command line (without running it).
+pub fn parse_command_line(args: &[String]) -> Result<(), String> {
+    use clap::Parser;
+    let argv = std::iter::once("sysid".to_string()).chain(args.iter().cloned());
+    crate::Cli::try_parse_from(argv)
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}

@@ -318,3 +318,45 @@ fn demo_is_thread_independent() {
         ],
     );
 }
+
+/// `sysid bench` runs the studies: their result lines (not their timings) are the same
+/// for any thread count.
+#[test]
+fn bench_studies_are_thread_independent() {
+    let timing = |k: &str| k.contains("seconds") || k == "threads";
+    let mut reference: Option<Vec<serde_json::Value>> = None;
+    for threads in ["1", "2", "4"] {
+        let out = sysid(&[
+            "--threads",
+            threads,
+            "bench",
+            "nlbench-em",
+            "--runs",
+            "3",
+            "--iters",
+            "3",
+            "--steps",
+            "200",
+            "--particles",
+            "20",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| {
+                let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+                v.as_object_mut().unwrap().retain(|k, _| !timing(k));
+                v
+            })
+            .collect();
+        assert_eq!(lines.len(), 4, "3 runs and a summary");
+        match &reference {
+            None => reference = Some(lines),
+            Some(first) => assert_eq!(first, &lines, "nlbench-em differs with {threads} threads"),
+        }
+    }
+}

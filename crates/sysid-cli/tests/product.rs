@@ -86,7 +86,11 @@ fn demo_prints_the_table_and_draws_the_four_figures() {
     assert_figure(
         &figures,
         "loglik-trace",
-        &["log-likelihood", "lti2x2: exact EM"],
+        &[
+            "log-likelihood",
+            "lti2x2: exact EM",
+            "EM runs (one line each)",
+        ],
     );
     // the directory was given: a second run refuses to replace the figures
     let again = sysid(&[

@@ -173,7 +173,11 @@ where
 fn tick(v: &f64) -> String {
     let a = v.abs();
     if a != 0.0 && !(1e-3..1e5).contains(&a) {
-        format!("{v:.0e}")
+        // three significant digits, trailing zeros of the mantissa dropped
+        let text = format!("{v:.2e}");
+        let (mantissa, exponent) = text.split_once('e').unwrap_or((&text, "0"));
+        let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+        format!("{mantissa}e{exponent}")
     } else {
         let text = format!("{v:.4}");
         let text = text.trim_end_matches('0').trim_end_matches('.');
@@ -304,6 +308,8 @@ mod tests {
         assert_eq!(tick(&-0.0), "0");
         assert_eq!(tick(&1e-5), "1e-5");
         assert_eq!(tick(&2e6), "2e6");
+        assert_eq!(tick(&-1.2e5), "-1.2e5");
+        assert_eq!(tick(&1.234e-7), "1.23e-7");
     }
 
     #[test]

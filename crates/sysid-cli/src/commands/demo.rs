@@ -319,6 +319,19 @@ fn bode_panels(rows: &[LinearRow]) -> Vec<Panel> {
     panels
 }
 
+/// One EM run's line in a bundle; the first carries the bundle's legend entry.
+fn bundle_member(k: usize, points: Vec<(f64, f64)>) -> Curve {
+    let line = Curve::faint(points);
+    if k == 0 {
+        Curve {
+            name: Some("EM runs (one line each)".into()),
+            ..line
+        }
+    } else {
+        line
+    }
+}
+
 fn figures(
     linear: &LinearPart,
     runs: &[NlbenchRun],
@@ -332,7 +345,7 @@ fn figures(
     let trajectories = (0..4)
         .map(|p| {
             let mut panel = Panel::new(format!("parameter {}", names[p]), "EM iteration", names[p]);
-            for run in runs {
+            for (k, run) in runs.iter().enumerate() {
                 let points = std::iter::once((0.0, abcd(&run.start)[p]))
                     .chain(
                         run.trajectory
@@ -341,7 +354,7 @@ fn figures(
                             .map(|(k, v)| ((k + 1) as f64, v[p])),
                     )
                     .collect();
-                panel = panel.with_series(Curve::faint(points));
+                panel = panel.with_series(bundle_member(k, points));
             }
             panel.with_series(
                 Curve::line(
@@ -438,7 +451,7 @@ fn figures(
             .skip(1)
             .map(|(i, &l)| (i as f64, l))
             .collect();
-        particle_trace = particle_trace.with_series(Curve::faint(points));
+        particle_trace = particle_trace.with_series(bundle_member(run.run, points));
     }
     vec![
         ("em-trajectories", Figure::grid(trajectories, 2)),

@@ -141,7 +141,7 @@ fn trace_figure(path: &Path) -> Result<Figure, CliError> {
                 "EM iteration",
                 y_label,
             )
-            .with_series(Series::line(name.clone(), points).unnamed()),
+            .with_series(Series::line(name.clone(), points)),
         );
     }
     let columns = if panels.len() > 1 { 2 } else { 1 };
@@ -212,13 +212,10 @@ fn data_figure(path: &Path) -> Result<Figure, CliError> {
         .zip(&columns)
         .filter(|(h, _)| *h != "t")
         .map(|(name, values)| {
-            Panel::new(name.clone(), "t", name.clone()).with_series(
-                Series::line(
-                    name.clone(),
-                    t.iter().copied().zip(values.iter().copied()).collect(),
-                )
-                .unnamed(),
-            )
+            Panel::new(name.clone(), "t", name.clone()).with_series(Series::line(
+                name.clone(),
+                t.iter().copied().zip(values.iter().copied()).collect(),
+            ))
         })
         .collect();
     if panels.is_empty() {

@@ -18,9 +18,17 @@ fn local_level(q: f64, r: f64) -> LinearGaussianModel {
 /// The exact ML estimate of (Q, R) by a 2-D search on the exact log-likelihood: a
 /// log-spaced grid, then coordinate-wise golden-section refinement until it settles.
 fn exact_ml(record: &Record) -> (f64, f64) {
+    exact_ml_above(record, 0.0)
+}
+
+/// As [`exact_ml`] over `Q, R >= floor`.
+fn exact_ml_above(record: &Record, floor: f64) -> (f64, f64) {
+    let low = floor.ln(); // -inf for no floor
     let mut ws = KalmanWorkspace::new();
     let mut ll = |lq: f64, lr: f64| ws.loglik(&local_level(lq.exp(), lr.exp()), record).unwrap();
-    let grid: Vec<f64> = (0..=60).map(|k| -6.0 + 8.0 * k as f64 / 60.0).collect();
+    let grid: Vec<f64> = (0..=60)
+        .map(|k| (-6.0 + 8.0 * k as f64 / 60.0_f64).max(low))
+        .collect();
     let (mut lq, mut lr, mut best) = (0.0, 0.0, f64::NEG_INFINITY);
     for &a in &grid {
         for &b in &grid {
@@ -41,8 +49,8 @@ fn exact_ml(record: &Record) -> (f64, f64) {
     };
     for _ in 0..60 {
         let (old_q, old_r) = (lq, lr);
-        lq = golden(&mut |x| ll(x, lr), lq - 0.3, lq + 0.3);
-        lr = golden(&mut |x| ll(lq, x), lr - 0.3, lr + 0.3);
+        lq = golden(&mut |x| ll(x, lr), (lq - 0.3).max(low), lq + 0.3);
+        lr = golden(&mut |x| ll(lq, x), (lr - 0.3).max(low), lr + 0.3);
         if (lq - old_q).abs() < 1e-9 && (lr - old_r).abs() < 1e-9 {
             break;
         }
@@ -50,16 +58,9 @@ fn exact_ml(record: &Record) -> (f64, f64) {
     (lq.exp(), lr.exp())
 }
 
-#[test]
-fn constrained_local_level_fit_matches_the_exact_ml_estimate() {
-    use rand::SeedableRng;
-    let truth = local_level(0.1, 1.0);
-    let sim = truth
-        .simulate(
-            &nalgebra::DMatrix::zeros(0, 500),
-            &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(9),
-        )
-        .unwrap();
+/// `sysid fit lti` of a local-level model (A, C, mu, P1, h fixed; Q, R free) with the
+/// given `--min-variance`: the fitted (Q, R).
+fn fit_local_level(record: &Record, min_variance: &str) -> (f64, f64, ModelSpec) {
     let dir = scratch_dir();
     let (data, init, out) = (
         dir.join("d.csv"),
@@ -67,8 +68,8 @@ fn constrained_local_level_fit_matches_the_exact_ml_estimate() {
         dir.join("fit.json"),
     );
     let mut csv = String::from("t,y1\n");
-    for t in 0..500 {
-        csv += &format!("{},{}\n", t + 1, sim.record.y[(0, t)]);
+    for t in 0..record.len() {
+        csv += &format!("{},{}\n", t + 1, record.y[(0, t)]);
     }
     std::fs::write(&data, csv).unwrap();
     let start = ModelSpec::from_model(&local_level(0.5, 0.5));
@@ -90,6 +91,8 @@ fn constrained_local_level_fit_matches_the_exact_ml_estimate() {
         "P1",
         "--fix",
         "h",
+        "--min-variance",
+        min_variance,
         "--max-iter",
         "20000",
         "--tol",
@@ -104,16 +107,54 @@ fn constrained_local_level_fit_matches_the_exact_ml_estimate() {
         String::from_utf8_lossy(&result.stderr)
     );
     let fitted: ModelSpec = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    let (q, r) = (fitted.q[0][0], fitted.r[0][0]);
-    let (q_ml, r_ml) = exact_ml(&sim.record);
-    eprintln!(
-        "EM: Q {q} R {r}; exact ML: Q {q_ml} R {r_ml}; {}",
-        String::from_utf8_lossy(&result.stdout)
-    );
+    (fitted.q[0][0], fitted.r[0][0], fitted)
+}
+
+fn local_level_data() -> Record {
+    use rand::SeedableRng;
+    local_level(0.1, 1.0)
+        .simulate(
+            &nalgebra::DMatrix::zeros(0, 500),
+            &mut rand::rngs::Xoshiro256PlusPlus::seed_from_u64(9),
+        )
+        .unwrap()
+        .record
+}
+
+#[test]
+fn constrained_local_level_fit_matches_the_exact_ml_estimate() {
+    let record = local_level_data();
+    let (q, r, fitted) = fit_local_level(&record, "0");
+    let (q_ml, r_ml) = exact_ml(&record);
+    eprintln!("EM: Q {q} R {r}; exact ML: Q {q_ml} R {r_ml}");
     assert!((q - q_ml).abs() <= 1e-3 * q_ml, "Q {q} vs {q_ml}");
     assert!((r - r_ml).abs() <= 1e-3 * r_ml, "R {r} vs {r_ml}");
     assert_eq!(fitted.a, vec![vec![1.0]]);
     assert_eq!(fitted.p1, Some(vec![vec![10.0]]));
+}
+
+/// With `--min-variance 0.3` (above the ML Q ~ 0.1, below the ML R ~ 1) EM reaches the
+/// exact maximum over Q, R >= 0.3: Q on the bound, R where the likelihood is largest
+/// given it.
+#[test]
+fn a_variance_floor_gives_the_exact_constrained_ml_estimate() {
+    let record = local_level_data();
+    let (q, r, _) = fit_local_level(&record, "0.3");
+    let (q_ml, r_ml) = exact_ml_above(&record, 0.3);
+    let (q_free, r_free) = exact_ml(&record);
+    eprintln!(
+        "EM, Q, R >= 0.3: Q {q} R {r}; exact: Q {q_ml} R {r_ml}; unconstrained Q {q_free} R {r_free}"
+    );
+    assert!(q_free < 0.3, "the floor must bind");
+    assert!(
+        (q - 0.3).abs() <= 1e-12 && (q_ml - 0.3).abs() <= 1e-6,
+        "Q {q}, {q_ml}"
+    );
+    assert!((r - r_ml).abs() <= 1e-3 * r_ml, "R {r} vs {r_ml}");
+    assert!(
+        (r - r_free).abs() > 1e-2 * r_free,
+        "R moved from the unconstrained optimum"
+    );
 }
 
 fn lti2x2_csv(dir: &Path, steps: &str) -> PathBuf {

@@ -1,6 +1,7 @@
 //! Exact EM never decreases the likelihood: 200 seeded random systems mixing fixed
 //! matrices, fixed individual entries, a free S, diagonal Q/R, inputs, offsets and
-//! missing data, 25 iterations each.
+//! missing data, 25 iterations each; one system in four also bounds the noise variances
+//! from below (`min_variance`).
 
 use nalgebra::{DMatrix, DVector};
 use rand::rngs::Xoshiro256PlusPlus;
@@ -94,6 +95,8 @@ fn case(seed: u64) -> (LinearGaussianModel, Vec<Record>, LinearEmSpec) {
         },
         mu: rng.random_bool(0.5),
         p1: rng.random_bool(0.5),
+        // every fourth system: a floor above some of the true noise variances (>= 0.05)
+        min_variance: if seed % 4 == 1 { 0.3 } else { 0.0 },
     };
     let start = truth
         .to_builder()
@@ -119,10 +122,14 @@ fn exact_em_never_decreases_the_likelihood() {
     let mut worst = 0.0_f64;
     let mut gains = Vec::new();
     let mut ecm_runs = 0;
+    let mut floor_active = 0;
     for seed in 0..200 {
         let (start, records, spec) = case(seed);
         ecm_runs += spec.needs_ecm() as usize;
         let result = fit(start, &records, spec.clone(), &options, &mut ());
+        if spec.min_variance > 0.0 {
+            floor_active += floor_holds(&result.estimate, &spec, seed) as usize;
+        }
         assert_eq!(
             result.termination,
             Termination::MaxIterations,
@@ -145,6 +152,38 @@ fn exact_em_never_decreases_the_likelihood() {
         "largest relative decrease {worst:e}; runs improving by > 1: {moved}/200; ECM runs {ecm_runs}"
     );
     assert!(ecm_runs > 50, "the mix must exercise the conditional route");
+    eprintln!("runs ending on the variance floor: {floor_active}/50");
+    assert!(floor_active >= 10, "the floor must bind in some runs");
+}
+
+/// Asserts that the free noise covariances respect the floor; returns whether one of
+/// them sits on it.
+fn floor_holds(model: &LinearGaussianModel, spec: &LinearEmSpec, seed: u64) -> bool {
+    let smallest = |m: &DMatrix<f64>| nalgebra::SymmetricEigen::new(m.clone()).eigenvalues.min();
+    let mut on_floor = false;
+    let mut free = Vec::new();
+    if spec.s {
+        // the joint [[Q, S], [S', R]] from the model's own factor L'L
+        let l = model.noise_factor();
+        let joint = l.transpose() * l;
+        free.push(joint);
+    } else {
+        for (structure, m) in [(spec.q, model.q()), (spec.r, model.r())] {
+            if structure != Covariance::Fixed {
+                free.push(m.clone());
+            }
+        }
+    }
+    for m in free {
+        let low = smallest(&m);
+        assert!(
+            low >= spec.min_variance * (1.0 - 1e-9),
+            "seed {seed}: a variance {low} below the floor {}",
+            spec.min_variance
+        );
+        on_floor |= low <= spec.min_variance * (1.0 + 1e-9);
+    }
+    on_floor
 }
 
 #[test]

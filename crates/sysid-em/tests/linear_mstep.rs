@@ -445,3 +445,94 @@ fn ecm_steps_equal_conditional_maximisations() {
     eprintln!("ECM covariance step vs numerical: max difference {diff:.1e}");
     assert!(diff < 1e-5, "{pi_new} vs {}", unpack_pi(&best));
 }
+
+/// With a variance floor the M-step is the constrained maximiser: C and R free (full and
+/// diagonal), against Nelder-Mead over C and `R = v I + L L'` (`v + l_i^2` for a
+/// diagonal R), on a case where the floor binds.
+#[test]
+fn with_a_variance_floor_the_m_step_is_the_constrained_maximiser() {
+    let truth = LinearGaussianModel::builder(
+        dmatrix![0.7, 0.2; -0.1, 0.5],
+        dmatrix![1.0, 0.0; 0.5, 1.0],
+        dmatrix![0.3, 0.0; 0.0, 0.2],
+        dmatrix![0.2, 0.05; 0.05, 0.02],
+    )
+    .build()
+    .unwrap();
+    let records = data(&truth, 60, 5, true);
+    for structure in [Covariance::Full, Covariance::Diagonal] {
+        let free = LinearEmSpec {
+            a: false,
+            b: false,
+            d: false,
+            h: false,
+            q: Covariance::Fixed,
+            r: structure,
+            mu: false,
+            p1: false,
+            ..LinearEmSpec::default()
+        };
+        let start = free
+            .project(
+                &truth
+                    .to_builder()
+                    .r(dmatrix![1.0, 0.0; 0.0, 1.0])
+                    .build()
+                    .unwrap(),
+            )
+            .unwrap();
+        let (stats, _) = LinearEm::new(&records, free.clone())
+            .e_step(&start)
+            .unwrap();
+        let smallest =
+            |m: &DMatrix<f64>| nalgebra::SymmetricEigen::new(m.clone()).eigenvalues.min();
+        let unconstrained = m_step(&start, &stats, &free).unwrap();
+        // a floor above the smallest variance of the unconstrained maximiser (and below
+        // the start's, which must lie in the constrained set)
+        let floor = 2.0 * smallest(unconstrained.r());
+        assert!(floor < 1.0);
+        let spec = LinearEmSpec {
+            min_variance: floor,
+            ..free
+        };
+        let closed = m_step(&start, &stats, &spec).unwrap();
+        assert!(
+            (smallest(closed.r()) - floor).abs() < 1e-12,
+            "the floor binds"
+        );
+        let candidate = |v: &[f64]| {
+            let c = DMatrix::from_column_slice(2, 2, &v[..4]);
+            let r = match structure {
+                Covariance::Diagonal => {
+                    DMatrix::from_diagonal(&dvector![floor + v[4] * v[4], floor + v[5] * v[5]])
+                }
+                _ => {
+                    let l = dmatrix![v[4], 0.0; v[5], v[6]];
+                    DMatrix::identity(2, 2) * floor + &l * l.transpose()
+                }
+            };
+            start.to_builder().c(c).r(r).build()
+        };
+        let objective = |v: &[f64]| match candidate(v) {
+            Ok(model) => -expected_loglik(&model, &stats),
+            Err(_) => f64::INFINITY,
+        };
+        let mut x0: Vec<f64> = start.c().iter().copied().collect();
+        x0.extend([0.3, 0.1, 0.3]);
+        let numeric = candidate(&nelder_mead(objective, x0)).unwrap();
+        let (q_closed, q_numeric) = (
+            expected_loglik(&closed, &stats),
+            expected_loglik(&numeric, &stats),
+        );
+        let diff = (closed.r() - numeric.r())
+            .amax()
+            .max((closed.c() - numeric.c()).amax());
+        eprintln!(
+            "{structure:?} R, floor {floor:.4}: Q closed {q_closed:.10}, numeric {q_numeric:.10}, max difference {diff:.1e}"
+        );
+        assert!(q_closed >= q_numeric - 1e-9 * q_closed.abs());
+        assert!(diff < 1e-4, "closed {closed:?} vs numeric {numeric:?}");
+        // and the unconstrained maximiser is better but infeasible
+        assert!(expected_loglik(&unconstrained, &stats) > q_closed);
+    }
+}

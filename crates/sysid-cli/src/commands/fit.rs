@@ -40,6 +40,11 @@ pub struct Options {
     /// initial value is replaced by its diagonal.
     #[arg(long, value_delimiter = ',')]
     pub diag: Vec<String>,
+    /// Linear EM: bound the free noise variances below (`Q, R >= V I`, in the data's
+    /// units; 0 = plain maximum likelihood). Use it when the likelihood climbs towards
+    /// a singular `Q` or `R`, where EM is no longer numerically monotone.
+    #[arg(long, value_name = "V", default_value_t = 0.0)]
+    pub min_variance: f64,
     /// Maximum number of EM iterations (particle EM runs exactly this many).
     #[arg(long, visible_alias = "iters", default_value_t = 500)]
     pub max_iter: usize,
@@ -172,7 +177,19 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         message: e.to_string(),
     })?;
     let file = o.data.read()?;
-    let mut spec = LinearEmSpec::default();
+    if !(o.min_variance.is_finite() && o.min_variance >= 0.0) {
+        return Err(CliError::BadOption {
+            option: "--min-variance",
+            message: format!(
+                "must be a finite non-negative number, got {}",
+                o.min_variance
+            ),
+        });
+    }
+    let mut spec = LinearEmSpec {
+        min_variance: o.min_variance,
+        ..LinearEmSpec::default()
+    };
     let start = initial_model(o, &file)?;
     let start = apply(start, &mut spec, &fixes, &o.diag)?;
     let start = spec.project(&start)?;
@@ -228,9 +245,63 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             option: "fit",
             message: format!(
                 "EM decreased the log-likelihood at iteration {iteration} ({previous} -> {current}); \
-                 the better model was written; this is a bug, please report it"
+                 the better model was written; {}",
+                decrease_diagnosis(&result.estimate)
             ),
         });
     }
     Ok(())
+}
+
+/// Why exact EM may have lowered the likelihood at `model`: a noise covariance that is
+/// numerically singular (the statistics no longer resolve its small direction), or, if
+/// none is, a request for a bug report.
+fn decrease_diagnosis(model: &sysid::kalman::LinearGaussianModel) -> String {
+    let ratio = |m: &nalgebra::DMatrix<f64>| {
+        let e = nalgebra::SymmetricEigen::new(m.clone()).eigenvalues;
+        e.min() / e.amax()
+    };
+    let singular: Vec<String> = [("Q", model.q()), ("R", model.r())]
+        .into_iter()
+        .filter(|(_, m)| m.nrows() > 0 && m.amax() > 0.0 && ratio(m) < 1e-10)
+        .map(|(name, m)| format!("{name} (smallest/largest eigenvalue {:.1e})", ratio(m)))
+        .collect();
+    if singular.is_empty() {
+        "this is a bug, please report it".into()
+    } else {
+        format!(
+            "the likelihood is rising towards a singular {}, where rounding dominates the M-step: \
+             bound the variances with --min-variance (e.g. 1e-6 of the output variance)",
+            singular.join(" and ")
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::decrease_diagnosis;
+    use nalgebra::dmatrix;
+    use sysid::kalman::LinearGaussianModel;
+
+    fn model(r_small: f64) -> LinearGaussianModel {
+        LinearGaussianModel::builder(
+            dmatrix![0.5],
+            dmatrix![1.0; 0.5],
+            dmatrix![1.0],
+            dmatrix![1.0, 0.0; 0.0, r_small],
+        )
+        .build()
+        .unwrap()
+    }
+
+    #[test]
+    fn a_decrease_at_a_singular_r_points_to_the_variance_floor() {
+        let message = decrease_diagnosis(&model(1e-14));
+        assert!(
+            message.contains("singular R (smallest/largest eigenvalue 1.0e-14)"),
+            "{message}"
+        );
+        assert!(message.contains("--min-variance"), "{message}");
+        assert!(decrease_diagnosis(&model(0.1)).contains("bug"));
+    }
 }

@@ -108,6 +108,7 @@ const CASES: &[Case] = &[
     case("iterations 0", &[("d.csv", DATA_U)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--max-iter", "0", "--out", "{dir}/out.json"], &["max_iterations"]),
     case("negative tolerance", &[("d.csv", DATA_U)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--tol=-1", "--out", "{dir}/out.json"], &["tol", "-1"]),
     case("NaN tolerance", &[("d.csv", DATA_U)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--tol", "NaN", "--out", "{dir}/out.json"], &["tol", "NaN"]),
+    case("negative variance floor", &[("d.csv", DATA_U)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--min-variance=-1", "--out", "{dir}/out.json"], &["min-variance", "-1"]),
     case("order 0", &[("d.csv", DATA_U)], &["n4sid", "--data", "{dir}/d.csv", "--order", "0", "--out", "{dir}/out.json"], &["order"]),
     case("more block rows than data", &[("d.csv", DATA_U)], &["n4sid", "--data", "{dir}/d.csv", "--order", "1", "--block-rows", "50", "--out", "{dir}/out.json"], &["50 block rows", "samples"]),
     case("unknown matrix to fix", &[("d.csv", DATA_U)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--fix", "Z", "--out", "{dir}/out.json"], &["--fix", "Z"]),

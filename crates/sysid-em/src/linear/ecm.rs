@@ -1,6 +1,7 @@
 //! The conditional (ECM) M-step: fixed individual entries of `A`, `B`, `C`, `D`, and a
 //! free cross-covariance `S`.
 
+use super::floor_variances;
 use super::mstep::{initial_state, structured};
 use super::{Covariance, LinearEmError, LinearEmSpec};
 use nalgebra::{DMatrix, DVector};
@@ -149,15 +150,15 @@ pub(super) fn m_step_ecm(
     let e_ss = e.view((0, 0), (n, n)).clone_owned();
     let e_oo = e.view((n, n), (p, p)).clone_owned();
     if spec.s {
+        let e = floor_variances(e, Covariance::Full, spec.min_variance);
         builder = builder
-            .q(e_ss)
-            .r(e_oo)
+            .q(e.view((0, 0), (n, n)).clone_owned())
+            .r(e.view((n, n), (p, p)).clone_owned())
             .s(e.view((0, n), (n, p)).clone_owned());
     } else {
-        builder =
-            builder
-                .q(structured(e_ss, spec.q, model.q()))
-                .r(structured(e_oo, spec.r, model.r()));
+        builder = builder
+            .q(structured(e_ss, spec.q, model.q(), spec.min_variance))
+            .r(structured(e_oo, spec.r, model.r(), spec.min_variance));
     }
     builder = initial_state(builder, model, stats, spec);
     Ok(builder.build()?)

@@ -29,7 +29,7 @@ mod mstep;
 mod spec;
 
 pub use mstep::m_step;
-pub use spec::{Covariance, FixedEntries, LinearEmSpec};
+pub use spec::{Covariance, FixedEntries, LinearEmSpec, floor_variances};
 
 use crate::{EmAlgorithm, EmObserver, EmOptions, EmResult, run_em};
 use sysid_kalman::{

@@ -1,19 +1,23 @@
 //! The closed-form M-step of linear EM (the Cholesky route of Gibson and Ninness).
 
-use super::{Covariance, LinearEmError, LinearEmSpec};
+use super::{Covariance, LinearEmError, LinearEmSpec, floor_variances};
 use crate::regression::fit_block;
 use nalgebra::{DMatrix, DVector};
 use sysid_kalman::{LinearGaussianModel, SufficientStatistics};
 use sysid_linalg::psd_factor;
 
+/// The M-step's noise covariance with the spec's structure and variance floor.
 pub(super) fn structured(
     cov: DMatrix<f64>,
     structure: Covariance,
     initial: &DMatrix<f64>,
+    floor: f64,
 ) -> DMatrix<f64> {
     match structure {
-        Covariance::Full => cov,
-        Covariance::Diagonal => DMatrix::from_diagonal(&cov.diagonal()),
+        Covariance::Full => floor_variances(cov, structure, floor),
+        Covariance::Diagonal => {
+            floor_variances(DMatrix::from_diagonal(&cov.diagonal()), structure, floor)
+        }
         Covariance::Fixed => initial.clone(),
     }
 }
@@ -31,6 +35,8 @@ pub(super) fn structured(
 /// keeps the diagonal of the residual covariance (the rows are then independent
 /// regressions with the same regressors, so the coefficients do not change). The
 /// initial state: `mu = mean E{x_1}`, `P1 = mean E{(x_1 - mu)(x_1 - mu)'}` over records.
+/// With `spec.min_variance > 0`, a free `Q` or `R` is the constrained maximiser
+/// ([`floor_variances`]); the regression coefficients do not depend on it.
 ///
 /// Fixed individual entries or a free `S` switch to the conditional route
 /// (`ecm`): a generalised least-squares step for the free entries of
@@ -80,7 +86,7 @@ pub fn m_step(
         if let Some(b) = coef[1].clone() {
             builder = builder.b(b);
         }
-        builder = builder.q(structured(cov, spec.q, model.q()));
+        builder = builder.q(structured(cov, spec.q, model.q(), spec.min_variance));
     }
 
     // ---- output block: y_t on [x_t; u_t; 1] ----
@@ -101,7 +107,7 @@ pub fn m_step(
         if let Some(h) = &coef[2] {
             builder = builder.h(h.column(0).clone_owned());
         }
-        builder = builder.r(structured(cov, spec.r, model.r()));
+        builder = builder.r(structured(cov, spec.r, model.r(), spec.min_variance));
     }
 
     builder = initial_state(builder, model, stats, spec);

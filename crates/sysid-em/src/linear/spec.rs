@@ -45,7 +45,7 @@ pub struct FixedEntries {
 /// let spec = LinearEmSpec { d: false, h: false, r: Covariance::Diagonal, ..LinearEmSpec::default() };
 /// assert!(spec.a && !spec.d);
 /// ```
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct LinearEmSpec {
     /// Estimate `A`.
     pub a: bool,
@@ -69,6 +69,22 @@ pub struct LinearEmSpec {
     pub s: bool,
     /// Entries of `A`, `B`, `C`, `D` held fixed.
     pub fixed_entries: FixedEntries,
+    /// Lower bound `v` on the noise variances: a free `Q` and a free `R` are
+    /// constrained to `Q >= v I` and `R >= v I` (a diagonal one entry by entry; with `S`
+    /// free, the joint `[[Q, S], [S', R]] >= v I`), in the units of the data. `0` (the
+    /// default) is plain maximum likelihood.
+    ///
+    /// Why: the likelihood can grow without bound as `R` (or `Q`) becomes singular, for
+    /// example when some output combination is fitted exactly. EM then creeps towards
+    /// that boundary, and once the smallest eigenvalue is ~1e-12 of the largest the
+    /// smoothed statistics no longer resolve it: the M-step is dominated by rounding
+    /// and can lower the likelihood (reported as
+    /// [`crate::Termination::LikelihoodDecreased`]). With the bound, the M-step is the
+    /// exact constrained maximiser (the unconstrained covariance with its eigenvalues
+    /// raised to `v`: the objective `-log det R - tr(R^{-1} E)` separates in the
+    /// eigenbasis of `E`), so EM stays monotone and converges to the constrained
+    /// maximum.
+    pub min_variance: f64,
 }
 
 impl Default for LinearEmSpec {
@@ -85,8 +101,72 @@ impl Default for LinearEmSpec {
             p1: true,
             s: false,
             fixed_entries: FixedEntries::default(),
+            min_variance: 0.0,
         }
     }
+}
+
+/// A free noise covariance with its variances raised to at least `floor`: a full one
+/// keeps its eigenvectors and raises its eigenvalues (`V max(Lambda, floor) V'`), a
+/// diagonal one its diagonal entries. Returned unchanged (bit for bit) when nothing is
+/// below `floor`, so a zero floor is plain maximum likelihood.
+///
+/// This is the maximiser of `-log det R - tr(R^{-1} E)` over `R >= floor I` given the
+/// unconstrained maximiser `E`: by von Neumann's trace inequality the objective is
+/// largest when `R` shares the eigenvectors of `E`, and then it separates into
+/// `-log r_i - e_i / r_i`, maximised on `r_i >= floor` at `max(e_i, floor)`.
+pub fn floor_variances(cov: DMatrix<f64>, structure: Covariance, floor: f64) -> DMatrix<f64> {
+    if floor <= 0.0 {
+        return cov;
+    }
+    match structure {
+        Covariance::Fixed => cov,
+        Covariance::Diagonal => {
+            if cov.diagonal().iter().all(|&v| v >= floor) {
+                return cov;
+            }
+            DMatrix::from_diagonal(&cov.diagonal().map(|v| v.max(floor)))
+        }
+        Covariance::Full => {
+            if cov.nrows() == 0 || smallest_eigenvalue(&cov) >= floor {
+                return cov;
+            }
+            let eigen = nalgebra::SymmetricEigen::new(cov);
+            let raised = eigen.eigenvalues.map(|v| v.max(floor));
+            let mut out = &eigen.eigenvectors
+                * DMatrix::from_diagonal(&raised)
+                * eigen.eigenvectors.transpose();
+            sysid_linalg::symmetrize(&mut out);
+            out
+        }
+    }
+}
+
+/// The smallest eigenvalue of a symmetric matrix (`+inf` for an empty one).
+pub(super) fn smallest_eigenvalue(m: &DMatrix<f64>) -> f64 {
+    if m.nrows() == 0 {
+        return f64::INFINITY;
+    }
+    nalgebra::SymmetricEigen::new(m.clone()).eigenvalues.min()
+}
+
+/// Whether a variance of `m` is below `floor` by more than the rounding of
+/// [`floor_variances`]'s reconstruction (`1e-10` of the larger of `floor` and `max|m|`).
+fn below_floor(m: &DMatrix<f64>, floor: f64) -> bool {
+    floor > 0.0 && smallest_eigenvalue(m) < floor - 1e-10 * floor.max(m.amax())
+}
+
+/// `[[Q, S], [S', R]]`.
+fn joint_noise(model: &LinearGaussianModel) -> DMatrix<f64> {
+    let (n, p) = (model.n(), model.p());
+    let mut joint = DMatrix::zeros(n + p, n + p);
+    joint.view_mut((0, 0), (n, n)).copy_from(model.q());
+    joint.view_mut((n, n), (p, p)).copy_from(model.r());
+    joint.view_mut((0, n), (n, p)).copy_from(model.s());
+    joint
+        .view_mut((n, 0), (p, n))
+        .copy_from(&model.s().transpose());
+    joint
 }
 
 fn is_diagonal(m: &DMatrix<f64>) -> bool {
@@ -122,6 +202,12 @@ impl LinearEmSpec {
                 "estimating S needs full (free) Q and R".into(),
             ));
         }
+        if !(self.min_variance.is_finite() && self.min_variance >= 0.0) {
+            return Err(LinearEmError::InvalidSpec(format!(
+                "min_variance must be a finite non-negative number, got {}",
+                self.min_variance
+            )));
+        }
         for (name, structure, matrix) in [("Q", self.q, model.q()), ("R", self.r, model.r())] {
             if structure == Covariance::Diagonal && !is_diagonal(matrix) {
                 return Err(LinearEmError::InitialNotInSpec {
@@ -129,22 +215,52 @@ impl LinearEmSpec {
                     reason: "must be diagonal (use LinearEmSpec::project to keep its diagonal)",
                 });
             }
+            if structure != Covariance::Fixed && !self.s && below_floor(matrix, self.min_variance) {
+                return Err(LinearEmError::InitialNotInSpec {
+                    matrix: name,
+                    reason: "has a variance below min_variance (use LinearEmSpec::project to raise it)",
+                });
+            }
+        }
+        if self.s && below_floor(&joint_noise(model), self.min_variance) {
+            return Err(LinearEmError::InitialNotInSpec {
+                matrix: "[[Q, S], [S', R]]",
+                reason: "has a variance below min_variance (use LinearEmSpec::project to raise it)",
+            });
         }
         Ok(())
     }
 
     /// The model moved into this spec's parameter set: a `Q` or `R` to be estimated as
-    /// diagonal keeps only its diagonal.
+    /// diagonal keeps only its diagonal, and the variances of a free one are raised to
+    /// `min_variance` ([`floor_variances`]).
     pub fn project(
         &self,
         model: &LinearGaussianModel,
     ) -> Result<LinearGaussianModel, LinearEmError> {
         let mut builder = model.to_builder();
-        if self.q == Covariance::Diagonal {
-            builder = builder.q(DMatrix::from_diagonal(&model.q().diagonal()));
-        }
-        if self.r == Covariance::Diagonal {
-            builder = builder.r(DMatrix::from_diagonal(&model.r().diagonal()));
+        if self.s {
+            let (n, p) = (model.n(), model.p());
+            let joint = floor_variances(joint_noise(model), Covariance::Full, self.min_variance);
+            builder = builder
+                .q(joint.view((0, 0), (n, n)).clone_owned())
+                .r(joint.view((n, n), (p, p)).clone_owned())
+                .s(joint.view((0, n), (n, p)).clone_owned());
+        } else {
+            for (structure, matrix, is_q) in [(self.q, model.q(), true), (self.r, model.r(), false)]
+            {
+                let projected = match structure {
+                    Covariance::Fixed => continue,
+                    Covariance::Full => matrix.clone(),
+                    Covariance::Diagonal => DMatrix::from_diagonal(&matrix.diagonal()),
+                };
+                let projected = floor_variances(projected, structure, self.min_variance);
+                builder = if is_q {
+                    builder.q(projected)
+                } else {
+                    builder.r(projected)
+                };
+            }
         }
         Ok(builder.build()?)
     }

@@ -99,7 +99,8 @@ enum Command {
     /// Fit a model by maximum likelihood: `lti` (exact EM), `nlbench` and `affine`
     /// (particle EM or PSAEM), `wiener` (gradient EM, blind).
     #[command(
-        after_help = "Examples:\n  sysid fit lti --data d.csv --order 8 --out fit.json --trace trace.csv\n  sysid fit lti --data d.csv --init start.json --fix D=0 --diag R --out fit.json\n  sysid fit nlbench --data nl.csv --max-iter 200 --particles 50 --out nl-fit.json\n  sysid fit nlbench --data nl.csv --method psaem --particles 15 --out nl-fit.json\n  sysid fit wiener --data w.csv --max-iter 100 --out wiener.json"
+        after_help = "Examples:\n  sysid fit lti --data d.csv --order 8 --out fit.json --trace trace.csv\n  sysid fit lti --data d.csv --init start.json --fix D=0 --diag R --out fit.json\n  sysid fit nlbench --data nl.csv --max-iter 200 --particles 50 --out nl-fit.json\n  sysid fit nlbench --data nl.csv --method psaem --particles 15 --iters 2000 --estimate-noise=q --out nl-fit.json
+  sysid fit lti --data d.csv --order 8 --min-variance 1e-8 --out fit.json\n  sysid fit wiener --data w.csv --max-iter 100 --out wiener.json"
     )]
     Fit(commands::fit::Options),
     /// Print the exact log-likelihood of data under a model (square-root Kalman filter).

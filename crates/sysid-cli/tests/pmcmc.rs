@@ -253,26 +253,47 @@ fn bad_pmcmc_input_gives_one_line_errors_and_no_file() {
 fn fit_nlbench_by_psaem_runs() {
     let dir = scratch_dir();
     let data = simulate(&dir, "nlbench", 200, 2);
+    // `fit nlbench --method psaem` on the data with `extra` flags, writing `out`
+    let psaem = |iters: &str, extra: &[&str], out: &std::path::Path| {
+        let mut args = vec![
+            "fit",
+            "nlbench",
+            "--method",
+            "psaem",
+            "--data",
+            s(&data),
+            "--iters",
+            iters,
+            "--particles",
+            "15",
+            "--out",
+            s(out),
+        ];
+        args.extend(extra);
+        sysid(&args)
+    };
     let fit = dir.join("fit.json");
-    let summary = json_of(&sysid(&[
-        "fit",
-        "nlbench",
-        "--method",
-        "psaem",
-        "--data",
-        s(&data),
-        "--iters",
-        "30",
-        "--particles",
-        "15",
-        "--out",
-        s(&fit),
-        "--json",
-    ]));
+    let summary = json_of(&psaem("30", &["--json"], &fit));
     assert_eq!(summary["iterations"], 30);
     let model: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fit).unwrap()).unwrap();
     assert_eq!(model["particle_em"]["method"], "psaem");
+    // --estimate-noise=q frees q only, =r r only, bare both
+    for (which, q_free, r_free) in [("=q", true, false), ("=r", false, true), ("", true, true)] {
+        let out = dir.join(format!("noise{which}.json"));
+        let flag = format!("--estimate-noise{which}");
+        let result = psaem("5", &[&flag], &out);
+        assert!(
+            result.status.success(),
+            "{}",
+            String::from_utf8_lossy(&result.stderr)
+        );
+        let model: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        let (q, r) = (model["q"].as_f64(), model["r"].as_f64());
+        assert_eq!(q != Some(0.01), q_free, "{flag}: q {q:?}");
+        assert_eq!(r != Some(0.1), r_free, "{flag}: r {r:?}");
+    }
     assert_one_line_error(
         &sysid(&[
             "fit",

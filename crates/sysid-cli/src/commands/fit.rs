@@ -64,9 +64,19 @@ pub struct Options {
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Particle EM: also estimate the noise covariances (else held at their start).
-    #[arg(long)]
-    pub estimate_noise: bool,
+    /// Particle EM and PSAEM: also estimate the noise covariances (else held at their
+    /// start): `--estimate-noise` both, `--estimate-noise=q` the process noise only,
+    /// `--estimate-noise=r` the output noise only. At a small process noise (nlbench's
+    /// q = 0.01), estimating q is what lets the particle kernel move the trajectory.
+    #[arg(
+        long,
+        value_name = "WHICH",
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "both",
+        value_parser = ["q", "r", "both"]
+    )]
+    pub estimate_noise: Option<String>,
     /// Stopping tolerance on the relative log-likelihood change.
     #[arg(long, default_value_t = 1e-6)]
     pub tol: f64,

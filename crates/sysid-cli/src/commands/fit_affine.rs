@@ -3,7 +3,7 @@
 //!
 //! - `fit nlbench` (= `fit affine --system nlbench`): the seed-000 benchmark; `--init
 //!   a,b,c,d[,q,r]` (default: the benchmark's nominal values). q and r are held at their
-//!   starting values unless `--estimate-noise`.
+//!   starting values unless `--estimate-noise` (`=q` or `=r` for one of them).
 //! - `fit affine --init model.json`: a linear Gaussian model (no inputs, offset or S) in
 //!   affine form; A, C, Q and R are estimated by particle EM (the exact answer is
 //!   `fit lti`; this is the check of the particle machinery on real data).
@@ -142,14 +142,13 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
     };
     super::check_column_counts(&file, 0, outputs)?;
     let job = Job { o, file, options };
-    let noise = if o.estimate_noise {
-        Covariance::Full
-    } else {
-        Covariance::Fixed
+    let free = |which: &str| match o.estimate_noise.as_deref() {
+        Some(w) if w == which || w == "both" => Covariance::Full,
+        _ => Covariance::Fixed,
     };
     let spec = AffineEmSpec {
-        pi_x: noise,
-        pi_y: noise,
+        pi_x: free("q"),
+        pi_y: free("r"),
         ..AffineEmSpec::default()
     };
     match chosen {

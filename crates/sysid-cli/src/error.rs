@@ -76,6 +76,10 @@ pub enum CliError {
         option: &'static str,
         message: String,
     },
+    /// Exact EM lowered the likelihood: a failure of the computation, not of the
+    /// input (the better model was written).
+    #[error("fit: {0}")]
+    LikelihoodDecreased(String),
     #[error("{0}")]
     Subspace(#[from] sysid::subspace::SubspaceError),
     #[error("{0}")]
@@ -130,7 +134,7 @@ impl CliError {
             )
         };
         let bad_input = match self {
-            CliError::Io { .. } => false,
+            CliError::Io { .. } | CliError::LikelihoodDecreased(_) => false,
             // the data or the model is at fault, not the computation
             CliError::Kalman { source, .. } => matches!(
                 source,

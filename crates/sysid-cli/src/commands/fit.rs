@@ -251,14 +251,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         current,
     } = result.termination
     {
-        return Err(CliError::BadOption {
-            option: "fit",
-            message: format!(
-                "EM decreased the log-likelihood at iteration {iteration} ({previous} -> {current}); \
-                 the better model was written; {}",
-                decrease_diagnosis(&result.estimate)
-            ),
-        });
+        return Err(CliError::LikelihoodDecreased(format!(
+            "EM decreased the log-likelihood at iteration {iteration} ({previous} -> {current}); \
+             the better model was written; {}",
+            decrease_diagnosis(&result.estimate)
+        )));
     }
     Ok(())
 }
@@ -313,5 +310,12 @@ mod tests {
         );
         assert!(message.contains("--min-variance"), "{message}");
         assert!(decrease_diagnosis(&model(0.1)).contains("bug"));
+    }
+
+    #[test]
+    fn a_decrease_is_a_failure_not_bad_input() {
+        let error = crate::error::CliError::LikelihoodDecreased("x".into());
+        assert_eq!(error.exit_code(), 1);
+        assert_eq!(error.to_string(), "fit: x");
     }
 }

@@ -1,6 +1,7 @@
 //! Rough timing of the SMC kernels on `nlbench` (T = 1000); the criterion group `smc`
 //! and the runner `sysid-bench smc` are the measurements of record.
-//! Usage: `cargo run --release --example pf_quick [pf|tanizaki|ffbsi|reject|all]`.
+//! Usage: `cargo run --release --example pf_quick [pf|tanizaki|ffbsi|reject|all]`
+//! (`PF_QUICK_DEFAULT_ONLY=1` stops `tanizaki` after its default settings, for profiling).
 use std::time::Instant;
 use sysid::prelude::*;
 use sysid::smc::{Ffbsi, FfbsiReject, Tanizaki};
@@ -59,6 +60,9 @@ fn main() {
             .unwrap()
             .1;
         println!("tanizaki M=50: {ms:.3} ms {stats:?}");
+        if std::env::var_os("PF_QUICK_DEFAULT_ONLY").is_some() {
+            return;
+        }
         let exact = Tanizaki {
             parallel: false,
             max_trials: Some(0),

@@ -15,6 +15,16 @@ fn lgss_data(steps: usize, seed: u64) -> (Record, Vec<f64>) {
     (sim.record, y)
 }
 
+/// A filter with `particles` particles that stores its history for the smoothers.
+fn stored_filter(particles: usize) -> ParticleFilter {
+    ParticleFilter::new(FilterOptions {
+        particles,
+        store_history: true,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
 /// Mean and standard error of a sample.
 fn mean_se(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;
@@ -178,12 +188,7 @@ fn rejection_ffbsi_and_exact_ffbsi_draw_the_same_marginals() {
     let (_, y) = lgss_data(100, 31);
     let model = LinearGaussianSmc::new(&lgss()).unwrap();
     let data = Series::new(&y, 1).unwrap();
-    let mut pf = ParticleFilter::new(FilterOptions {
-        particles: 300,
-        store_history: true,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut pf = stored_filter(300);
     pf.run(&model, &data, 5).unwrap();
     let history = pf.history().unwrap();
     let k = 2000;
@@ -221,12 +226,7 @@ fn tanizaki_by_rejection_and_by_exact_draws_give_the_same_marginals() {
     let model = Nlbench::truth();
     let sim = model.simulate(60, 4);
     let data = Series::new(&sim.outputs, 1).unwrap();
-    let mut pf = ParticleFilter::new(FilterOptions {
-        particles: 1000,
-        store_history: true,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut pf = stored_filter(1000);
     pf.run(&model, &data, 3).unwrap();
     let history = pf.history().unwrap();
     let exact_smoother = Tanizaki {
@@ -249,12 +249,7 @@ fn genealogy_paths_are_filter_ancestries() {
     let (_, y) = lgss_data(50, 41);
     let model = LinearGaussianSmc::new(&lgss()).unwrap();
     let data = Series::new(&y, 1).unwrap();
-    let mut pf = ParticleFilter::new(FilterOptions {
-        particles: 100,
-        store_history: true,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut pf = stored_filter(100);
     pf.run(&model, &data, 9).unwrap();
     let h = pf.history().unwrap();
     let (paths, _) = Genealogy { paths: 10 }
@@ -325,4 +320,68 @@ fn same_seed_gives_identical_bits_with_one_and_four_threads() {
     })
     .unwrap();
     assert_eq!(pf.run(&model, &data, 77).unwrap().loglik.to_bits(), one.0);
+}
+
+/// `Nlbench` without its scalar-Gaussian capability, so that smoothers take the
+/// general path that evaluates every candidate.
+struct WithoutScalarMeans(Nlbench);
+
+impl sysid::smc::StateSpace for WithoutScalarMeans {
+    fn state_dim(&self) -> usize {
+        1
+    }
+}
+
+impl sysid::smc::TransitionDensity for WithoutScalarMeans {
+    fn log_transition(&self, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        self.0.log_transition(t, x, u, next)
+    }
+
+    fn log_transition_matrix(
+        &self,
+        t: usize,
+        u: &[f64],
+        from: &[f64],
+        to: &[f64],
+        out: &mut [f64],
+        scratch: &mut Vec<f64>,
+    ) {
+        self.0.log_transition_matrix(t, u, from, to, out, scratch);
+    }
+}
+
+#[test]
+fn tanizaki_by_the_nearest_mean_draws_the_same_bits_as_the_general_kernel() {
+    use sysid::smc::TransitionDensity;
+    let model = Nlbench::truth();
+    assert!(
+        model
+            .scalar_gaussian_means(0, &[], &[0.5], &mut Vec::new())
+            .is_some()
+    );
+    let sim = model.simulate(300, 8);
+    let data = Series::new(&sim.outputs, 1).unwrap();
+    let mut pf = stored_filter(50);
+    pf.run(&model, &data, 5).unwrap();
+    let history = pf.history().unwrap();
+    let general = WithoutScalarMeans(Nlbench::truth());
+    for max_trials in [None, Some(1), Some(40)] {
+        let smoother = Tanizaki {
+            parallel: false,
+            max_trials,
+        };
+        let (fast, fast_stats) = smoother.trajectories(&model, history, &data, 6).unwrap();
+        let (slow, slow_stats) = smoother.trajectories(&general, history, &data, 6).unwrap();
+        assert_eq!(fast_stats.trials, slow_stats.trials);
+        assert_eq!(fast_stats.fallbacks, slow_stats.fallbacks);
+        assert!(fast_stats.fallbacks > 0, "{fast_stats:?}");
+        assert!(fast_stats.density_evaluations < slow_stats.density_evaluations);
+        for t in 0..300 {
+            let (a, b) = (fast.states(t), slow.states(t));
+            assert!(
+                a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "t = {t}, max_trials {max_trials:?}"
+            );
+        }
+    }
 }

@@ -7,8 +7,8 @@ use rand_distr::{Distribution, StandardNormal};
 use sysid_kalman::LinearGaussianModel;
 use sysid_linalg::{LinalgError, cholesky_upper};
 use sysid_smc::{
-    GuidedProposal, InitialDensity, InitialSampler, ObservationDensity, StateSpace,
-    TransitionBound, TransitionDensity, TransitionSampler,
+    GuidedProposal, InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel,
+    StateSpace, TransitionBound, TransitionDensity, TransitionSampler,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -430,11 +430,10 @@ impl TransitionDensity for LinearGaussianSmc {
             self.transition_mean(x, u, mean);
         }
         if n == 1 {
-            let half_inv_q = 0.5 / (self.q_lower[0] * self.q_lower[0]);
+            let kernel = self.scalar_kernel();
             for (row, &next) in out.chunks_exact_mut(count).zip(to) {
                 for (value, &mean) in row.iter_mut().zip(scratch.iter()) {
-                    let e = next - mean;
-                    *value = self.log_norm_q - half_inv_q * e * e;
+                    *value = kernel.log_density(mean, next);
                 }
             }
             return;
@@ -448,6 +447,33 @@ impl TransitionDensity for LinearGaussianSmc {
                 }
                 *value = self.log_norm_q - 0.5 * Self::whitened_norm2(&self.q_lower, n, r);
             }
+        }
+    }
+
+    fn scalar_gaussian_means(
+        &self,
+        _t: usize,
+        u: &[f64],
+        from: &[f64],
+        means: &mut Vec<f64>,
+    ) -> Option<ScalarGaussianKernel> {
+        if self.n != 1 {
+            return None;
+        }
+        means.resize(from.len(), 0.0);
+        for (mean, x) in means.iter_mut().zip(from) {
+            self.transition_mean(std::slice::from_ref(x), u, std::slice::from_mut(mean));
+        }
+        Some(self.scalar_kernel())
+    }
+}
+
+impl LinearGaussianSmc {
+    /// The transition noise of a scalar state as a kernel of `(mean, next)`.
+    fn scalar_kernel(&self) -> ScalarGaussianKernel {
+        ScalarGaussianKernel {
+            log_norm: self.log_norm_q,
+            half_inv_var: 0.5 / (self.q_lower[0] * self.q_lower[0]),
         }
     }
 }

@@ -3,8 +3,8 @@
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_smc::{
-    InitialDensity, InitialSampler, ObservationDensity, StateSpace, TransitionBound,
-    TransitionDensity, TransitionSampler, stream,
+    InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel, StateSpace,
+    TransitionBound, TransitionDensity, TransitionSampler, stream,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -147,11 +147,33 @@ impl Nlbench {
         self.params.a * x + self.params.b * x / (1.0 + x * x) + forcing
     }
 
+    /// Writes the transition means of `from` at step `t` into `means`.
+    #[inline(always)]
+    fn transition_means(
+        &self,
+        t: usize,
+        from: &[f64],
+        means: &mut Vec<f64>,
+    ) -> ScalarGaussianKernel {
+        let forcing = self.forcing(t);
+        means.clear();
+        means.extend(from.iter().map(|&x| self.mean(x, forcing)));
+        self.transition_kernel()
+    }
+
+    /// The transition noise `N(0, q)` as a kernel of `(mean, next)`.
+    #[inline(always)]
+    fn transition_kernel(&self) -> ScalarGaussianKernel {
+        ScalarGaussianKernel {
+            log_norm: self.log_norm_q,
+            half_inv_var: self.half_inv_q,
+        }
+    }
+
     /// `log N(next; mean, q)`.
     #[inline(always)]
     fn log_transition_density(&self, mean: f64, next: f64) -> f64 {
-        let e = next - mean;
-        self.log_norm_q - self.half_inv_q * e * e
+        self.transition_kernel().log_density(mean, next)
     }
 
     /// `log N(y; d x^2, r)`.
@@ -279,15 +301,24 @@ impl TransitionDensity for Nlbench {
         out: &mut [f64],
         scratch: &mut Vec<f64>,
     ) {
-        let forcing = self.forcing(t);
-        scratch.clear();
-        scratch.extend(from.iter().map(|&x| self.mean(x, forcing)));
+        let kernel = self.transition_means(t, from, scratch);
         let m = from.len();
         for (row, &next) in out.chunks_exact_mut(m).zip(to) {
             for (value, &mean) in row.iter_mut().zip(scratch.iter()) {
-                *value = self.log_transition_density(mean, next);
+                *value = kernel.log_density(mean, next);
             }
         }
+    }
+
+    #[inline(always)]
+    fn scalar_gaussian_means(
+        &self,
+        t: usize,
+        _u: &[f64],
+        from: &[f64],
+        means: &mut Vec<f64>,
+    ) -> Option<ScalarGaussianKernel> {
+        Some(self.transition_means(t, from, means))
     }
 }
 

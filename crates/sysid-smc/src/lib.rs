@@ -41,8 +41,8 @@ pub use error::SmcError;
 pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
 pub use history::History;
 pub use model::{
-    FilterModel, GuidedProposal, InitialDensity, InitialSampler, ObservationDensity, StateSpace,
-    TransitionBound, TransitionDensity, TransitionSampler,
+    FilterModel, GuidedProposal, InitialDensity, InitialSampler, ObservationDensity,
+    ScalarGaussianKernel, StateSpace, TransitionBound, TransitionDensity, TransitionSampler,
 };
 pub use resample::Resampling;
 pub use series::Series;

@@ -124,6 +124,78 @@ pub trait TransitionDensity: StateSpace {
             }
         }
     }
+
+    /// For a scalar state whose transition is Gaussian around a state-dependent mean,
+    /// `x_{t+1} = mean(x_t, u_t, t) + w_t`, `w_t ~ N(0, v)` with `v` free of `x_t`:
+    /// writes `mean(from[i], u, t)` into `means` (resized to `from.len()`) and returns
+    /// the kernel. `None` (the default) when the model does not have this form at `t`.
+    ///
+    /// Smoothers that resample with probabilities ∝ `f(x~ | x_i)` then find the
+    /// largest candidate in one pass over the means (the nearest one) and evaluate
+    /// single candidates on demand instead of materialising every pair. An override
+    /// must agree bit for bit with
+    /// [`log_transition_matrix`](Self::log_transition_matrix):
+    /// `log f(to_j | from_i) = kernel.log_density(means[i], to_j)`.
+    fn scalar_gaussian_means(
+        &self,
+        t: usize,
+        u: &[f64],
+        from: &[f64],
+        means: &mut Vec<f64>,
+    ) -> Option<ScalarGaussianKernel> {
+        let _ = (t, u, from, means);
+        None
+    }
+}
+
+/// The log-density of a scalar Gaussian transition `x' ~ N(mean, v)` as a function of
+/// `(mean, x')`: `log_norm - half_inv_var * e * e` with `e = x' - mean`, evaluated in
+/// exactly that order (models that report this form compute their
+/// [`TransitionDensity::log_transition_matrix`] with [`log_density`](Self::log_density),
+/// so both give the same bits).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScalarGaussianKernel {
+    /// `-ln(2 pi v) / 2`.
+    pub log_norm: f64,
+    /// `1 / (2 v)`.
+    pub half_inv_var: f64,
+}
+
+impl ScalarGaussianKernel {
+    /// The kernel of `N(mean, variance)`.
+    ///
+    /// # Example
+    /// ```
+    /// use sysid_smc::ScalarGaussianKernel;
+    /// let k = ScalarGaussianKernel::with_variance(4.0);
+    /// let expected = -0.5 * (8.0 * std::f64::consts::PI).ln() - 1.0 / 8.0;
+    /// assert!((k.log_density(1.0, 2.0) - expected).abs() < 1e-15);
+    /// assert_eq!(k.log_density_at(-3.0), k.log_density_at(3.0));
+    /// ```
+    pub fn with_variance(variance: f64) -> Self {
+        ScalarGaussianKernel {
+            log_norm: -0.5 * (2.0 * std::f64::consts::PI * variance).ln(),
+            half_inv_var: 0.5 / variance,
+        }
+    }
+
+    /// `log N(next; mean, v)`.
+    #[inline(always)]
+    pub fn log_density(&self, mean: f64, next: f64) -> f64 {
+        self.log_density_at(next - mean)
+    }
+
+    /// The log-density at a residual `e = next - mean`; the same bits for `e` and `-e`.
+    #[inline(always)]
+    pub fn log_density_at(&self, e: f64) -> f64 {
+        self.log_norm - self.half_inv_var * e * e
+    }
+
+    /// Both constants finite and the variance positive, so that the log-density falls
+    /// as `|next - mean|` grows and is NaN only where `next - mean` is.
+    pub fn is_proper(&self) -> bool {
+        self.log_norm.is_finite() && self.half_inv_var.is_finite() && self.half_inv_var > 0.0
+    }
 }
 
 /// An upper bound `log c >= log f(x' | x, u_t, t)` for all `x, x'`, needed by

@@ -4,6 +4,7 @@ use rand::RngExt;
 
 use super::SmootherStats;
 use super::backward::{BackwardStep, backward_error, gather};
+use super::nearest;
 use crate::model::TransitionDensity;
 use crate::simd::Kernel;
 use crate::streams::Rng;
@@ -124,6 +125,27 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
         } else {
             self.history.states(t)
         };
+        if let (true, Some(trials)) = (resampled && n == 1, self.rejection_trials) {
+            // equally weighted candidates: bound each row by its nearest mean
+            let kernel =
+                self.model
+                    .scalar_gaussian_means(t, self.data.input(t), cloud, &mut self.scratch);
+            if let Some(kernel) = kernel.filter(|k| k.is_proper()) {
+                let ancestors = self.history.ancestors(t + 1);
+                return nearest::draw_block(
+                    kernel,
+                    &self.scratch,
+                    next_states,
+                    trials,
+                    t,
+                    out,
+                    |i| ancestors[i],
+                    rng,
+                    &mut self.matrix,
+                    &mut self.stats,
+                );
+            }
+        }
         self.matrix.resize(out.len() * m, 0.0);
         self.model.log_transition_matrix(
             t,

@@ -30,6 +30,7 @@
 mod backward;
 mod exact;
 mod genealogy;
+mod nearest;
 mod paths;
 mod reject;
 
@@ -183,6 +184,12 @@ impl<M: TransitionDensity + Sync> Smoother<M> for Ffbsi {
 /// needs one exponential variate per trial instead of `M` exponentials,
 /// which makes the smoother several times faster when the candidates' densities are of
 /// comparable size (seed 000's benchmark: about half of the proposals are accepted).
+///
+/// For a scalar Gaussian transition
+/// ([`TransitionDensity::scalar_gaussian_means`] returns a kernel, as for `nlbench` and
+/// scalar linear models) the row maximum is the nearest transition mean, found without
+/// evaluating the row, and only the proposed candidates are evaluated: the same draws,
+/// bit for bit, at about half the cost on seed 000's benchmark.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Tanizaki {
     /// Draw blocks of paths in parallel (same result either way).

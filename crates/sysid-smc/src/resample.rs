@@ -110,14 +110,48 @@ pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
     let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
     for (i, &w) in weights[..last].iter().enumerate() {
         cumulative += w;
-        // ceil without a libm call: truncate, then add one if something was cut off.
-        let z = cumulative * scale - u;
-        let truncated = z as i64;
-        let count = (truncated + i64::from((truncated as f64) < z)).clamp(0, n as i64) as usize;
-        if count < n {
-            out[count] = i + 1;
-        }
+        mark_count(cumulative, i, scale, u, out);
     }
+    running_max(out);
+}
+
+/// [`systematic`] from the running sums `cumulative[i] = w_0 + ... + w_i` (added in that
+/// order, so that the last one is the total) and the index `last` of the last positive
+/// weight: the same ancestors, bit for bit, without [`systematic`]'s two sequential
+/// sums, for callers that keep the running sums anyway.
+#[inline(always)]
+pub(crate) fn systematic_from_cumulative(
+    cumulative: &[f64],
+    last: usize,
+    u: f64,
+    out: &mut [usize],
+) {
+    let n = out.len();
+    let scale = n as f64 / cumulative[cumulative.len() - 1];
+    out.fill(0);
+    for (i, &c) in cumulative[..last].iter().enumerate() {
+        mark_count(c, i, scale, u, out);
+    }
+    running_max(out);
+}
+
+/// Marks `out[count] = i + 1` for `count = ceil(cumulative * scale - u)` (clamped at 0;
+/// nothing when it is `out.len()` or more).
+#[inline(always)]
+fn mark_count(cumulative: f64, i: usize, scale: f64, u: f64, out: &mut [usize]) {
+    let n = out.len();
+    // ceil without a libm call: truncate, then add one if something was cut off.
+    let z = cumulative * scale - u;
+    let truncated = z as i64;
+    let count = (truncated + i64::from((truncated as f64) < z)).clamp(0, n as i64) as usize;
+    if count < n {
+        out[count] = i + 1;
+    }
+}
+
+/// Replaces each entry by the largest entry up to it.
+#[inline(always)]
+fn running_max(out: &mut [usize]) {
     let mut running = 0;
     for slot in out.iter_mut() {
         running = running.max(*slot);

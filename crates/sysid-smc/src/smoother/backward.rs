@@ -57,37 +57,100 @@ pub(crate) fn gather(history: &History, t: usize, indices: &[usize], out: &mut [
     }
 }
 
-/// Runs block `block` (paths `[block * PATH_BLOCK, ...)`) of `paths` backward, calling
-/// `sink(t, states_t, states_{t+1})` from `t = T - 1` (with `None`) down to 0.
-fn run_block<S: BackwardStep>(
+/// The walk of one block of paths: its random stream and the indices and states of
+/// its paths at the current step and the one after it.
+struct BlockWalk {
+    first_path: usize,
+    rng: Rng,
+    next_indices: Vec<usize>,
+    indices: Vec<usize>,
+    next_states: Vec<f64>,
+    states: Vec<f64>,
+}
+
+impl BlockWalk {
+    /// Block `block` of `paths`, started at the last step from `Cat(W_{T-1})`.
+    fn start(history: &History, paths: usize, block: usize, seed: u64) -> Self {
+        let n = history.state_dim();
+        let size = PATH_BLOCK.min(paths - block * PATH_BLOCK);
+        let last = history.steps() - 1;
+        let mut rng = stream(seed, block as u64);
+        let final_weights = history.weights(last);
+        let next_indices: Vec<usize> = (0..size)
+            .map(|_| find_cumulative(final_weights, rng.random::<f64>()))
+            .collect();
+        let mut next_states = vec![0.0; size * n];
+        gather(history, last, &next_indices, &mut next_states);
+        BlockWalk {
+            first_path: block * PATH_BLOCK,
+            rng,
+            indices: vec![0; size],
+            next_indices,
+            states: vec![0.0; size * n],
+            next_states,
+        }
+    }
+
+    /// One step back, from `t + 1` to `t`.
+    fn step_back<S: BackwardStep>(
+        &mut self,
+        history: &History,
+        t: usize,
+        step: &mut S,
+    ) -> Result<(), SmcError> {
+        step.step(
+            t,
+            &self.next_states,
+            &self.next_indices,
+            &mut self.indices,
+            &mut self.rng,
+        )
+        .map_err(|e| offset_path(e, self.first_path))?;
+        gather(history, t, &self.indices, &mut self.states);
+        Ok(())
+    }
+
+    /// Makes step `t` the step after the next one back.
+    fn advance(&mut self) {
+        std::mem::swap(&mut self.states, &mut self.next_states);
+        std::mem::swap(&mut self.indices, &mut self.next_indices);
+    }
+}
+
+/// Runs the blocks `blocks` of `paths` backward in lockstep: every block takes step `t`
+/// before any takes `t - 1`, so each step's filter particles (and whatever the step
+/// derives from them) are loaded into the cache once for all of them. Calls
+/// `sink(t, states_t, states_{t+1})` with the states of all the blocks' paths, in path
+/// order, from `t = T - 1` (with `None`) down to 0. Each block keeps its own random
+/// stream, so the paths are those of running the blocks one after another.
+fn run_blocks<S: BackwardStep>(
     history: &History,
     paths: usize,
-    block: usize,
+    blocks: std::ops::Range<usize>,
     seed: u64,
     step: &mut S,
     sink: &mut impl FnMut(usize, &[f64], Option<&[f64]>),
 ) -> Result<(), SmcError> {
-    let n = history.state_dim();
-    let size = PATH_BLOCK.min(paths - block * PATH_BLOCK);
     let last = history.steps() - 1;
-    let mut rng = stream(seed, block as u64);
-    let mut next_indices = vec![0usize; size];
-    let mut indices = vec![0usize; size];
-    let mut next_states = vec![0.0; size * n];
-    let mut states = vec![0.0; size * n];
-    let final_weights = history.weights(last);
-    for i in next_indices.iter_mut() {
-        *i = find_cumulative(final_weights, rng.random::<f64>());
-    }
-    gather(history, last, &next_indices, &mut next_states);
+    let mut walks: Vec<BlockWalk> = blocks
+        .map(|block| BlockWalk::start(history, paths, block, seed))
+        .collect();
+    let mut next_states: Vec<f64> = walks
+        .iter()
+        .flat_map(|w| w.next_states.iter().copied())
+        .collect();
+    let mut states = vec![0.0; next_states.len()];
     sink(last, &next_states, None);
     for t in (0..last).rev() {
-        step.step(t, &next_states, &next_indices, &mut indices, &mut rng)
-            .map_err(|e| offset_path(e, block * PATH_BLOCK))?;
-        gather(history, t, &indices, &mut states);
+        let mut offset = 0;
+        for walk in walks.iter_mut() {
+            walk.step_back(history, t, step)?;
+            states[offset..offset + walk.states.len()].copy_from_slice(&walk.states);
+            offset += walk.states.len();
+            walk.advance();
+        }
         sink(t, &states, Some(&next_states));
         std::mem::swap(&mut states, &mut next_states);
-        std::mem::swap(&mut indices, &mut next_indices);
     }
     Ok(())
 }
@@ -127,30 +190,39 @@ where
 {
     check_paths(paths)?;
     let blocks = paths.div_ceil(PATH_BLOCK);
-    let one_block = |block: usize| -> Result<(Trajectories, SmootherStats), SmcError> {
-        let size = PATH_BLOCK.min(paths - block * PATH_BLOCK);
-        let n = history.state_dim();
+    let n = history.state_dim();
+    // contiguous groups of blocks, one per worker: the paths do not depend on the split
+    let workers = if parallel {
+        rayon::current_num_threads().clamp(1, blocks)
+    } else {
+        1
+    };
+    let per_group = blocks.div_ceil(workers);
+    let groups = blocks.div_ceil(per_group);
+    let one_group = |group: usize| -> Result<(Trajectories, SmootherStats), SmcError> {
+        let first = group * per_group;
+        let range = first..(first + per_group).min(blocks);
+        let first_path = first * PATH_BLOCK;
+        let size = (range.end * PATH_BLOCK).min(paths) - first_path;
         let mut out = Trajectories::zeros(history.steps(), size, n);
         let mut step = make_step();
-        run_block(
+        run_blocks(
             history,
             paths,
-            block,
+            range,
             seed,
             &mut step,
-            &mut |t, states, _| {
-                out.states_mut(t).copy_from_slice(states);
-            },
+            &mut |t, states, _| out.states_mut(t).copy_from_slice(states),
         )?;
         Ok((out, step.stats()))
     };
-    let results: Vec<_> = if parallel && blocks > 1 {
-        (0..blocks).into_par_iter().map(one_block).collect()
+    let results: Vec<_> = if groups > 1 {
+        (0..groups).into_par_iter().map(one_group).collect()
     } else {
-        (0..blocks).map(one_block).collect()
+        vec![one_group(0)]
     };
     let mut stats = SmootherStats::default();
-    let mut pieces = Vec::with_capacity(blocks);
+    let mut pieces = Vec::with_capacity(groups);
     for r in results {
         let (piece, s) = r?;
         stats.merge(&s);
@@ -159,8 +231,9 @@ where
     Ok((Trajectories::concat(pieces), stats))
 }
 
-/// Streams the pairs of `paths` trajectories into an additive functional, block after
-/// block, without storing the trajectories.
+/// Streams the pairs of `paths` trajectories into an additive functional, step after
+/// step (all paths of step `t`, in path order, from `T - 1` down to 0), without storing
+/// the trajectories.
 pub(crate) fn additive<S, F>(
     history: &History,
     paths: usize,
@@ -175,15 +248,13 @@ where
     check_paths(paths)?;
     let n = history.state_dim();
     let weight = 1.0 / paths as f64;
-    for block in 0..paths.div_ceil(PATH_BLOCK) {
-        run_block(
-            history,
-            paths,
-            block,
-            seed,
-            &mut step,
-            &mut |t, states, next| feed_step(functional, t, states, next, n, weight),
-        )?;
-    }
+    run_blocks(
+        history,
+        paths,
+        0..paths.div_ceil(PATH_BLOCK),
+        seed,
+        &mut step,
+        &mut |t, states, next| feed_step(functional, t, states, next, n, weight),
+    )?;
     Ok(step.stats())
 }

@@ -11,7 +11,10 @@
 //! | [`FfbsiReject`] | propose `i ~ Cat(W_t)`, accept w.p. `f / c`; exact draw after `max_trials` | expected O(T K) | [`TransitionBound`] |
 //!
 //! Paths are drawn in blocks of [`PATH_BLOCK`]; block `b` uses the random stream
-//! `(seed, b)`, so results do not depend on the thread count.
+//! `(seed, b)`, so results do not depend on the thread count. The blocks walk back in
+//! lockstep (all of them take step `t` before any takes `t - 1`), so that each step's
+//! filter particles and the tables derived from them (rejection FFBSi's proposal table,
+//! the transition means) are loaded and built once per step, not once per block.
 //!
 //! Each smoother gives either the trajectories ([`Smoother::trajectories`]) or, without
 //! storing them, the smoothed sum of an additive functional
@@ -41,7 +44,7 @@ use crate::model::{StateSpace, TransitionBound, TransitionDensity};
 use crate::{History, Series, SmcError};
 use exact::{Cloud, ExactStep};
 use genealogy::GenealogyStep;
-use reject::{ProposalTables, RejectStep};
+use reject::RejectStep;
 
 /// Work done by a smoother.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -263,18 +266,9 @@ impl FfbsiReject {
         model: &'a M,
         history: &'a History,
         data: &'a Series<'a>,
-        tables: &'a ProposalTables,
     ) -> RejectStep<'a, M> {
-        RejectStep {
-            model,
-            history,
-            data,
-            tables,
-            max_trials: self.max_trials.unwrap_or(history.particles()),
-            row: Vec::new(),
-            scratch: Vec::new(),
-            stats: SmootherStats::default(),
-        }
+        let max_trials = self.max_trials.unwrap_or(history.particles());
+        RejectStep::new(model, history, data, max_trials)
     }
 }
 
@@ -287,9 +281,8 @@ impl<M: TransitionBound + Sync> Smoother<M> for FfbsiReject {
         seed: u64,
     ) -> Result<(Trajectories, SmootherStats), SmcError> {
         check_history(history, data)?;
-        let tables = ProposalTables::new(history);
         backward::trajectories(history, self.paths, seed, self.parallel, || {
-            self.step(model, history, data, &tables)
+            self.step(model, history, data)
         })
     }
 
@@ -302,8 +295,7 @@ impl<M: TransitionBound + Sync> Smoother<M> for FfbsiReject {
         functional: &mut F,
     ) -> Result<SmootherStats, SmcError> {
         check_history(history, data)?;
-        let tables = ProposalTables::new(history);
-        let step = self.step(model, history, data, &tables);
+        let step = self.step(model, history, data);
         backward::additive(history, self.paths, seed, step, functional)
     }
 }

@@ -6,8 +6,8 @@ use rand_distr::{Distribution, Exp1};
 
 use super::SmootherStats;
 use super::backward::{BackwardStep, backward_error};
-use crate::model::TransitionBound;
-use crate::resample::systematic;
+use crate::model::{ScalarGaussianKernel, TransitionBound};
+use crate::resample::systematic_from_cumulative;
 use crate::streams::Rng;
 use crate::weights::draw_from_log_weights;
 use crate::{History, Series, SmcError};
@@ -16,56 +16,82 @@ pub(crate) struct RejectStep<'a, M> {
     pub model: &'a M,
     pub history: &'a History,
     pub data: &'a Series<'a>,
-    pub tables: &'a ProposalTables,
     pub max_trials: usize,
     pub row: Vec<f64>,
     pub scratch: Vec<f64>,
+    /// The proposal table of the step being walked, built when the step changes
+    /// (blocks walk in lockstep, so once per step for all of them).
+    pub proposal: ProposalTable,
+    /// For scalar Gaussian transitions: the transition means of step `means_step`'s
+    /// particles and the kernel, computed once per step (vectorised) instead of once
+    /// per trial.
+    pub means: Vec<f64>,
+    pub means_step: Option<(usize, Option<ScalarGaussianKernel>)>,
     pub stats: SmootherStats,
 }
 
-/// Per-step tables for O(1) expected draws from `Cat(W_t)`: the cumulative weights and
-/// a guide table (Chen and Asau 1974), `guide[j]` = the first particle whose cumulative
-/// weight exceeds `j / M` of the total.
-pub(crate) struct ProposalTables {
-    particles: usize,
-    cumulative: Vec<f64>,
-    guide: Vec<usize>,
-    last_positive: Vec<usize>,
+impl<'a, M> RejectStep<'a, M> {
+    pub fn new(
+        model: &'a M,
+        history: &'a History,
+        data: &'a Series<'a>,
+        max_trials: usize,
+    ) -> Self {
+        RejectStep {
+            model,
+            history,
+            data,
+            max_trials,
+            row: Vec::new(),
+            scratch: Vec::new(),
+            proposal: ProposalTable::default(),
+            means: Vec::new(),
+            means_step: None,
+            stats: SmootherStats::default(),
+        }
+    }
 }
 
-impl ProposalTables {
-    pub fn new(history: &History) -> Self {
-        let (steps, m) = (history.steps(), history.particles());
-        let mut cumulative = Vec::with_capacity(steps * m);
-        let mut guide = vec![0usize; steps * m];
-        let mut last_positive = Vec::with_capacity(steps);
-        for t in 0..steps {
-            let weights = history.weights(t);
-            let mut acc = 0.0;
-            cumulative.extend(weights.iter().map(|w| {
-                acc += w;
-                acc
-            }));
-            systematic(weights, 0.0, &mut guide[t * m..(t + 1) * m]);
-            last_positive.push(weights.iter().rposition(|&w| w > 0.0).unwrap_or(0));
+/// A table for O(1) expected draws from `Cat(W_t)` at one step: the cumulative weights
+/// and a guide table (Chen and Asau 1974), `guide[j]` = the first particle whose
+/// cumulative weight exceeds `j / M` of the total. Built in O(M) when the step changes;
+/// it stays in the cache while the blocks' trials hit it at random.
+#[derive(Default)]
+pub(crate) struct ProposalTable {
+    step: Option<usize>,
+    cumulative: Vec<f64>,
+    guide: Vec<usize>,
+    last_positive: usize,
+}
+
+impl ProposalTable {
+    /// Makes the table that of step `t` (nothing to do when it already is).
+    fn prepare(&mut self, history: &History, t: usize) {
+        if self.step == Some(t) {
+            return;
         }
-        ProposalTables {
-            particles: m,
-            cumulative,
-            guide,
-            last_positive,
-        }
+        let weights = history.weights(t);
+        let mut acc = 0.0;
+        self.cumulative.clear();
+        self.cumulative.extend(weights.iter().map(|w| {
+            acc += w;
+            acc
+        }));
+        self.last_positive = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
+        self.guide.resize(weights.len(), 0);
+        systematic_from_cumulative(&self.cumulative, self.last_positive, 0.0, &mut self.guide);
+        self.step = Some(t);
     }
 
     /// Draws `i ~ Cat(W_t)` from a uniform in [0, 1).
     #[inline]
-    fn draw(&self, t: usize, uniform: f64) -> usize {
-        let m = self.particles;
-        let cumulative = &self.cumulative[t * m..(t + 1) * m];
+    fn draw(&self, uniform: f64) -> usize {
+        let cumulative = &self.cumulative[..];
+        let m = cumulative.len();
         let target = uniform * cumulative[m - 1];
         let j = ((uniform * m as f64) as usize).min(m - 1);
-        let last = self.last_positive[t];
-        let mut i = self.guide[t * m + j].min(last);
+        let last = self.last_positive;
+        let mut i = self.guide[j].min(last);
         while i > 0 && cumulative[i - 1] > target {
             i -= 1;
         }
@@ -91,11 +117,29 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
         let states = self.history.states(t);
         let log_bound = self.model.log_transition_bound(t, u);
         let log_f = self.model.log_transition_at(t, u);
+        self.proposal.prepare(self.history, t);
+        let kernel = match self.means_step {
+            Some((step, kernel)) if step == t => kernel,
+            _ => {
+                let kernel = if n == 1 {
+                    self.model
+                        .scalar_gaussian_means(t, u, states, &mut self.means)
+                        .filter(ScalarGaussianKernel::is_proper)
+                } else {
+                    None
+                };
+                self.means_step = Some((t, kernel));
+                kernel
+            }
+        };
         'paths: for (k, (next, slot)) in next_states.chunks_exact(n).zip(out.iter_mut()).enumerate()
         {
             for _ in 0..self.max_trials {
-                let i = self.tables.draw(t, rng.random());
-                let value = log_f(&states[i * n..(i + 1) * n], next);
+                let i = self.proposal.draw(rng.random());
+                let value = match kernel {
+                    Some(kernel) => kernel.log_density(self.means[i], next[0]),
+                    None => log_f(&states[i * n..(i + 1) * n], next),
+                };
                 self.stats.trials += 1;
                 self.stats.density_evaluations += 1;
                 if value > log_bound {

@@ -282,18 +282,28 @@ impl ParticleFilter {
         let missing = data.is_missing(t);
         let previous = &self.previous;
         let ancestors = &self.ancestors;
-        let work = |chunk: usize, states: &mut [f64], log_obs: &mut [f64], rng: &mut Rng| {
-            fill_chunk(
-                model, data, t, missing, previous, ancestors, chunk, states, log_obs, rng,
-            )
-        };
         if self.options.parallel && self.rngs.len() > 1 {
+            // A closure is compiled for the baseline target: dispatch again inside it so
+            // that each chunk runs the vector kernels of this CPU.
             self.states
                 .par_chunks_mut(CHUNK * n)
                 .zip(self.log_obs.par_chunks_mut(CHUNK))
                 .zip(self.rngs.par_iter_mut())
                 .enumerate()
-                .for_each(|(c, ((states, log_obs), rng))| work(c, states, log_obs, rng));
+                .for_each(|(c, ((states, log_obs), rng))| {
+                    crate::simd::dispatch(ChunkKernel {
+                        model,
+                        data,
+                        t,
+                        missing,
+                        previous,
+                        ancestors,
+                        chunk: c,
+                        states,
+                        log_obs,
+                        rng,
+                    })
+                });
         } else {
             let chunks = self
                 .states
@@ -392,6 +402,40 @@ fn fill_chunk<M: FilterModel>(
         log_obs.fill(0.0);
     } else {
         model.log_observations(t, data.input(t), data.output(t), states, log_obs);
+    }
+}
+
+/// [`fill_chunk`] as a [`Kernel`], for the parallel path.
+struct ChunkKernel<'a, 's, M> {
+    model: &'a M,
+    data: &'a Series<'s>,
+    t: usize,
+    missing: bool,
+    previous: &'a [f64],
+    ancestors: &'a [usize],
+    chunk: usize,
+    states: &'a mut [f64],
+    log_obs: &'a mut [f64],
+    rng: &'a mut Rng,
+}
+
+impl<M: FilterModel> Kernel for ChunkKernel<'_, '_, M> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run(self) {
+        fill_chunk(
+            self.model,
+            self.data,
+            self.t,
+            self.missing,
+            self.previous,
+            self.ancestors,
+            self.chunk,
+            self.states,
+            self.log_obs,
+            self.rng,
+        )
     }
 }
 

@@ -5,7 +5,7 @@ use rand::RngExt;
 use super::SmootherStats;
 use super::backward::{BackwardStep, backward_error, gather};
 use super::nearest;
-use crate::model::TransitionDensity;
+use crate::model::{ScalarGaussianKernel, TransitionDensity};
 use crate::simd::Kernel;
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
@@ -41,6 +41,11 @@ pub(crate) struct ExactStep<'a, M> {
     pub matrix: Vec<f64>,
     pub scratch: Vec<f64>,
     pub gathered: Vec<f64>,
+    /// The step whose resampled cloud `gathered` holds (and, for scalar Gaussian
+    /// transitions, whose transition means `means` and `kernel` are).
+    pub cloud_step: Option<usize>,
+    pub means: Vec<f64>,
+    pub kernel: Option<ScalarGaussianKernel>,
     pub stats: SmootherStats,
 }
 
@@ -55,6 +60,9 @@ impl<'a, M: TransitionDensity> ExactStep<'a, M> {
             matrix: Vec::new(),
             scratch: Vec::new(),
             gathered: Vec::new(),
+            cloud_step: None,
+            means: Vec::new(),
+            kernel: None,
             stats: SmootherStats::default(),
         }
     }
@@ -113,7 +121,9 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
         let n = self.history.state_dim();
         let m = self.history.particles();
         let resampled = self.cloud == Cloud::Resampled && self.history.resampled_after(t);
-        let cloud: &[f64] = if resampled {
+        // the blocks walk in lockstep: the cloud (and its means) serve all of them
+        let fresh = self.cloud_step != Some(t);
+        if resampled && fresh {
             self.gathered.resize(m * n, 0.0);
             gather(
                 self.history,
@@ -121,20 +131,26 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
                 self.history.ancestors(t + 1),
                 &mut self.gathered,
             );
+        }
+        let cloud: &[f64] = if resampled {
             &self.gathered
         } else {
             self.history.states(t)
         };
         if let (true, Some(trials)) = (resampled && n == 1, self.rejection_trials) {
             // equally weighted candidates: bound each row by its nearest mean
-            let kernel =
-                self.model
-                    .scalar_gaussian_means(t, self.data.input(t), cloud, &mut self.scratch);
-            if let Some(kernel) = kernel.filter(|k| k.is_proper()) {
+            if fresh {
+                self.kernel = self
+                    .model
+                    .scalar_gaussian_means(t, self.data.input(t), cloud, &mut self.means)
+                    .filter(ScalarGaussianKernel::is_proper);
+            }
+            self.cloud_step = Some(t);
+            if let Some(kernel) = self.kernel {
                 let ancestors = self.history.ancestors(t + 1);
                 return nearest::draw_block(
                     kernel,
-                    &self.scratch,
+                    &self.means,
                     next_states,
                     trials,
                     t,
@@ -146,6 +162,7 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
                 );
             }
         }
+        self.cloud_step = resampled.then_some(t);
         self.matrix.resize(out.len() * m, 0.0);
         self.model.log_transition_matrix(
             t,

@@ -223,6 +223,61 @@ mod tests {
     use super::*;
     use crate::streams::stream;
 
+    /// Systematic resampling by its definition: position `k` goes to the number of
+    /// particles `i < last` whose count `ceil(n C_i / total - u)` is at most `k`
+    /// (O(n M), the same floating-point operations).
+    fn systematic_by_definition(weights: &[f64], u: f64, n: usize) -> Vec<usize> {
+        let total: f64 = weights.iter().sum();
+        let scale = n as f64 / total;
+        let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
+        let mut cumulative = 0.0;
+        let counts: Vec<usize> = weights[..last]
+            .iter()
+            .map(|&w| {
+                cumulative += w;
+                let z = cumulative * scale - u;
+                let truncated = z as i64;
+                (truncated + i64::from((truncated as f64) < z)).clamp(0, n as i64) as usize
+            })
+            .collect();
+        (0..n)
+            .map(|k| counts.iter().filter(|&&c| c <= k).count())
+            .collect()
+    }
+
+    #[test]
+    fn systematic_runs_equal_the_definition() {
+        let mut rng = stream(11, 0);
+        for case in 0..400 {
+            let m = 1 + case % 37;
+            let n = 1 + (case * 7) % 41;
+            let weights: Vec<f64> = (0..m)
+                .map(|i| match (case + i) % 5 {
+                    0 => 0.0,
+                    1 => 30.0 * rng.random::<f64>(), // long runs
+                    _ => rng.random::<f64>(),
+                })
+                .collect();
+            if weights.iter().all(|&w| w == 0.0) {
+                continue;
+            }
+            let u = rng.random::<f64>();
+            let mut out = vec![usize::MAX; n];
+            systematic(&weights, u, &mut out);
+            assert_eq!(out, systematic_by_definition(&weights, u, n), "case {case}");
+            let mut cumulative = Vec::new();
+            let mut acc = 0.0;
+            cumulative.extend(weights.iter().map(|w| {
+                acc += w;
+                acc
+            }));
+            let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
+            let mut from_sums = vec![usize::MAX; n];
+            systematic_from_cumulative(&cumulative, last, u, &mut from_sums);
+            assert_eq!(from_sums, out, "case {case}");
+        }
+    }
+
     #[test]
     fn every_scheme_keeps_a_point_mass() {
         let w = [0.0, 0.0, 1.0, 0.0];

@@ -89,6 +89,38 @@ fn adaptive_resampling_skips_some_steps() {
     );
 }
 
+#[test]
+fn a_filter_without_summaries_gives_the_same_likelihood_and_history() {
+    // PMMH and particle EM switch the per-step means and ESS off; nothing else may move,
+    // with resampling at every step and with adaptive resampling (which needs the ESS).
+    let (_, y) = lgss_data(100, 12);
+    let model = LinearGaussianSmc::new(&lgss()).unwrap();
+    let data = Series::new(&y, 1).unwrap();
+    for ess_threshold in [1.0, 0.5] {
+        let options = |record_summaries| FilterOptions {
+            particles: 64,
+            ess_threshold,
+            store_history: true,
+            record_summaries,
+            ..Default::default()
+        };
+        let mut with = ParticleFilter::new(options(true)).unwrap();
+        let mut without = ParticleFilter::new(options(false)).unwrap();
+        let a = with.run(&model, &data, 4).unwrap();
+        let b = without.run(&model, &data, 4).unwrap();
+        assert_eq!(a.loglik.to_bits(), b.loglik.to_bits());
+        assert_eq!(a.resampled_steps, b.resampled_steps);
+        let (h1, h2) = (with.history().unwrap(), without.history().unwrap());
+        for t in 0..100 {
+            assert_eq!(h1.states(t), h2.states(t));
+            assert_eq!(h1.weights(t), h2.weights(t));
+            assert_eq!(h1.ancestors(t), h2.ancestors(t));
+        }
+        assert_eq!((with.means().len(), with.ess().len()), (100, 100));
+        assert!(without.means().is_empty() && without.ess().is_empty());
+    }
+}
+
 /// Smoothed means of `replications` independent filter+smoother runs, per step.
 fn replicate_means<S: Smoother<LinearGaussianSmc>>(
     smoother: &S,

@@ -32,6 +32,8 @@ impl ParticlePass {
         let filter = ParticleFilter::new(FilterOptions {
             particles,
             store_history: true,
+            // the E-step uses the history and the log-likelihood only
+            record_summaries: false,
             ..FilterOptions::default()
         })?;
         Ok(ParticlePass {

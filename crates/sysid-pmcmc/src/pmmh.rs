@@ -207,6 +207,8 @@ fn run_chain<F: ModelFamily, P: Prior>(
     let mut filter = ParticleFilter::new(FilterOptions {
         particles: options.particles,
         resampling: options.resampling,
+        // only the log-likelihood estimate is used
+        record_summaries: false,
         ..Default::default()
     })
     .map_err(|source| PmcmcError::Smc {

@@ -82,6 +82,11 @@ pub struct FilterOptions {
     /// Run the particle chunks in parallel on the current rayon pool. The result does
     /// not depend on it. Default false.
     pub parallel: bool,
+    /// Record the filtered mean and the effective sample size of every step
+    /// ([`ParticleFilter::means`], [`ParticleFilter::ess`]). Default true. Estimators
+    /// that need only the log-likelihood (PMMH) switch it off, which saves two passes
+    /// over the weights per step; the log-likelihood and the history do not change.
+    pub record_summaries: bool,
 }
 
 impl Default for FilterOptions {
@@ -92,6 +97,7 @@ impl Default for FilterOptions {
             ess_threshold: 1.0,
             store_history: false,
             parallel: false,
+            record_summaries: true,
         }
     }
 }
@@ -172,12 +178,14 @@ impl ParticleFilter {
         &self.options
     }
 
-    /// The filtered means `sum_i W_t^i x_t^i` of the last run, time-major (T x n).
+    /// The filtered means `sum_i W_t^i x_t^i` of the last run, time-major (T x n);
+    /// empty when [`FilterOptions::record_summaries`] is off.
     pub fn means(&self) -> &[f64] {
         &self.means
     }
 
-    /// The effective sample size at each step of the last run (before resampling).
+    /// The effective sample size at each step of the last run (before resampling);
+    /// empty when [`FilterOptions::record_summaries`] is off.
     pub fn ess(&self) -> &[f64] {
         &self.ess
     }
@@ -222,9 +230,8 @@ impl ParticleFilter {
             self.propagate_and_weigh(model, data, t);
             let increment = self.reweight(t, data.is_missing(t))?;
             loglik += increment;
-            self.record(n);
+            let ess = self.record(n);
             if t + 1 < steps {
-                let ess = *self.ess.last().expect("recorded");
                 if self.options.ess_threshold >= 1.0 || ess < self.options.ess_threshold * m as f64
                 {
                     self.options.resampling.resample(
@@ -359,12 +366,22 @@ impl ParticleFilter {
     }
 
     #[inline(always)]
-    /// Stores the filtered mean, the ESS and (optionally) the history of step `t`.
-    fn record(&mut self, n: usize) {
-        let start = self.means.len();
-        self.means.resize(start + n, 0.0);
-        weighted_mean(&self.states, &self.weights, &mut self.means[start..]);
-        self.ess.push(effective_sample_size(&self.weights));
+    /// Stores the filtered mean and the ESS (with `record_summaries`) and the history
+    /// (with `store_history`) of step `t`; returns the ESS, or NaN when it is neither
+    /// recorded nor needed (resampling at every step).
+    fn record(&mut self, n: usize) -> f64 {
+        let adaptive = self.options.ess_threshold < 1.0;
+        let ess = if self.options.record_summaries || adaptive {
+            effective_sample_size(&self.weights)
+        } else {
+            f64::NAN // not needed: the filter resamples at every step
+        };
+        if self.options.record_summaries {
+            let start = self.means.len();
+            self.means.resize(start + n, 0.0);
+            weighted_mean(&self.states, &self.weights, &mut self.means[start..]);
+            self.ess.push(ess);
+        }
         if self.has_history {
             self.history.push(
                 &self.states,
@@ -373,6 +390,7 @@ impl ParticleFilter {
                 &self.ancestors,
             );
         }
+        ess
     }
 }
 

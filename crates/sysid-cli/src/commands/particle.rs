@@ -82,6 +82,7 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
         ess_threshold: a.ess,
         store_history,
         parallel: crate::threads() > 1,
+        record_summaries: true,
     };
     options.check().map_err(smc_error("options"))?;
     Ok(options)

@@ -50,6 +50,8 @@ fn pf_and_psmooth_on_nlbench_are_reproducible_across_thread_counts() {
         previous = Some((run, text));
     }
     for method in ["tanizaki", "ffbsi", "ffbsi-reject", "genealogy"] {
+        // Tanizaki's smoother draws one path per particle
+        let paths = if method == "tanizaki" { "100" } else { "70" };
         let mut outputs = Vec::new();
         for threads in ["1", "2"] {
             let out = dir.join(format!("{method}{threads}.csv"));
@@ -64,7 +66,7 @@ fn pf_and_psmooth_on_nlbench_are_reproducible_across_thread_counts() {
                 "--method",
                 method,
                 "--paths",
-                "70",
+                paths,
                 "--threads",
                 threads,
                 "--out",

@@ -55,9 +55,26 @@ pub struct SmoothArgs {
     /// Smoother: tanizaki, ffbsi, ffbsi-reject or genealogy.
     #[arg(long, default_value = "ffbsi-reject")]
     pub method: String,
-    /// Number of smoothed paths K (Tanizaki always uses M).
-    #[arg(long, default_value_t = 100)]
-    pub paths: usize,
+    /// Number of smoothed paths K [default: 100]. Tanizaki's smoother draws exactly M
+    /// (one per particle); giving another K with it is an error.
+    #[arg(long)]
+    pub paths: Option<usize>,
+}
+
+/// The number of paths of `method` with `particles` particles: `--paths` (default 100),
+/// except for Tanizaki's smoother, which draws one path per particle.
+fn paths_of(method: &str, paths: Option<usize>, particles: usize) -> Result<usize, CliError> {
+    match (method, paths) {
+        ("tanizaki", Some(k)) if k != particles => Err(CliError::BadOption {
+            option: "--paths",
+            message: format!(
+                "tanizaki draws one path per particle ({particles}), not {k}: \
+                 drop --paths, or use --method ffbsi or ffbsi-reject for another number"
+            ),
+        }),
+        ("tanizaki", _) => Ok(particles),
+        (_, k) => Ok(k.unwrap_or(100)),
+    }
 }
 
 fn smc_error(context: &str) -> impl Fn(SmcError) -> CliError + '_ {
@@ -235,6 +252,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     inputs: usize,
 ) -> Result<(), CliError> {
     let c = &a.common;
+    let path_count = paths_of(&a.method, a.paths, c.particles)?;
     let options = filter_options(c, true)?;
     let file = read_series(c, outputs, inputs)?;
     let context = c.data.data.display().to_string();
@@ -254,14 +272,14 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
                 max_trials: None,
             }
             .trajectories(model, history, &series, seed),
-            "ffbsi" => Ffbsi { paths: a.paths, parallel }.trajectories(model, history, &series, seed),
+            "ffbsi" => Ffbsi { paths: path_count, parallel }.trajectories(model, history, &series, seed),
             "ffbsi-reject" => FfbsiReject {
-                paths: a.paths,
+                paths: path_count,
                 max_trials: None,
                 parallel,
             }
             .trajectories(model, history, &series, seed),
-            "genealogy" => Genealogy { paths: a.paths }.trajectories(model, history, &series, seed),
+            "genealogy" => Genealogy { paths: path_count }.trajectories(model, history, &series, seed),
             other => {
                 return Err(CliError::BadOption {
                     option: "--method",

@@ -103,6 +103,7 @@ const CASES: &[Case] = &[
     case("ESS threshold above 1", &[("d.csv", DATA)], &["pf", "--system", "lgss", "--data", "{dir}/d.csv", "--ess", "1.5"], &["ess"]),
     case("unknown resampling scheme", &[("d.csv", DATA)], &["pf", "--system", "lgss", "--data", "{dir}/d.csv", "--resample", "lottery"], &["--resample", "lottery", "systematic"]),
     case("smoothed paths 0", &[("d.csv", DATA)], &["psmooth", "--system", "lgss", "--data", "{dir}/d.csv", "--paths", "0", "--out", "{dir}/out.csv"], &["paths"]),
+    case("tanizaki with another path count", &[("d.csv", DATA)], &["psmooth", "--system", "lgss", "--data", "{dir}/d.csv", "--method", "tanizaki", "--particles", "50", "--paths", "10", "--out", "{dir}/out.csv"], &["--paths", "one path per particle (50)"]),
     case("steps 0", &[], &["simulate", "lgss", "--steps", "0", "--out", "{dir}/out.csv"], &["steps"]),
     case("steps negative", &[], &["simulate", "lgss", "--steps", "-3", "--out", "{dir}/out.csv"], &["-3"]),
     case("iterations 0", &[("d.csv", DATA_U)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--max-iter", "0", "--out", "{dir}/out.json"], &["max_iterations"]),

@@ -416,27 +416,22 @@ impl TransitionDensity for LinearGaussianSmc {
 
     fn log_transition_matrix(
         &self,
-        _t: usize,
+        t: usize,
         u: &[f64],
         from: &[f64],
         to: &[f64],
         out: &mut [f64],
         scratch: &mut Vec<f64>,
     ) {
+        if let Some(kernel) = self.scalar_gaussian_means(t, u, from, scratch) {
+            kernel.log_density_matrix(scratch, to, out);
+            return;
+        }
         let n = self.n;
         let count = from.len() / n;
         scratch.resize(from.len(), 0.0);
         for (mean, x) in scratch.chunks_exact_mut(n).zip(from.chunks_exact(n)) {
             self.transition_mean(x, u, mean);
-        }
-        if n == 1 {
-            let kernel = self.scalar_kernel();
-            for (row, &next) in out.chunks_exact_mut(count).zip(to) {
-                for (value, &mean) in row.iter_mut().zip(scratch.iter()) {
-                    *value = kernel.log_density(mean, next);
-                }
-            }
-            return;
         }
         let mut residual = [0.0; MAX_DIM];
         for (row, next) in out.chunks_exact_mut(count).zip(to.chunks_exact(n)) {

@@ -292,25 +292,6 @@ impl TransitionDensity for Nlbench {
     }
 
     #[inline(always)]
-    fn log_transition_matrix(
-        &self,
-        t: usize,
-        _u: &[f64],
-        from: &[f64],
-        to: &[f64],
-        out: &mut [f64],
-        scratch: &mut Vec<f64>,
-    ) {
-        let kernel = self.transition_means(t, from, scratch);
-        let m = from.len();
-        for (row, &next) in out.chunks_exact_mut(m).zip(to) {
-            for (value, &mean) in row.iter_mut().zip(scratch.iter()) {
-                *value = kernel.log_density(mean, next);
-            }
-        }
-    }
-
-    #[inline(always)]
     fn scalar_gaussian_means(
         &self,
         t: usize,

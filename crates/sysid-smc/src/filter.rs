@@ -286,9 +286,14 @@ impl ParticleFilter {
     /// and evaluates `log g(y_t | x_t)`, chunk by chunk.
     fn propagate_and_weigh<M: FilterModel + Sync>(&mut self, model: &M, data: &Series, t: usize) {
         let n = model.state_dim();
-        let missing = data.is_missing(t);
-        let previous = &self.previous;
-        let ancestors = &self.ancestors;
+        let step = StepInputs {
+            model,
+            data,
+            t,
+            missing: data.is_missing(t),
+            previous: &self.previous,
+            ancestors: &self.ancestors,
+        };
         if self.options.parallel && self.rngs.len() > 1 {
             // A closure is compiled for the baseline target: dispatch again inside it so
             // that each chunk runs the vector kernels of this CPU.
@@ -297,15 +302,10 @@ impl ParticleFilter {
                 .zip(self.log_obs.par_chunks_mut(CHUNK))
                 .zip(self.rngs.par_iter_mut())
                 .enumerate()
-                .for_each(|(c, ((states, log_obs), rng))| {
+                .for_each(|(chunk, ((states, log_obs), rng))| {
                     crate::simd::dispatch(ChunkKernel {
-                        model,
-                        data,
-                        t,
-                        missing,
-                        previous,
-                        ancestors,
-                        chunk: c,
+                        step: &step,
+                        chunk,
                         states,
                         log_obs,
                         rng,
@@ -317,10 +317,15 @@ impl ParticleFilter {
                 .chunks_mut(CHUNK * n)
                 .zip(self.log_obs.chunks_mut(CHUNK))
                 .zip(self.rngs.iter_mut());
-            for (c, ((states, log_obs), rng)) in chunks.enumerate() {
-                fill_chunk(
-                    model, data, t, missing, previous, ancestors, c, states, log_obs, rng,
-                );
+            for (chunk, ((states, log_obs), rng)) in chunks.enumerate() {
+                ChunkKernel {
+                    step: &step,
+                    chunk,
+                    states,
+                    log_obs,
+                    rng,
+                }
+                .run();
             }
         }
     }
@@ -394,66 +399,58 @@ impl ParticleFilter {
     }
 }
 
-/// Draws the particles of one chunk at step `t` and evaluates their observation
-/// log-densities.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn fill_chunk<M: FilterModel>(
-    model: &M,
-    data: &Series,
-    t: usize,
-    missing: bool,
-    previous: &[f64],
-    ancestors: &[usize],
-    chunk: usize,
-    states: &mut [f64],
-    log_obs: &mut [f64],
-    rng: &mut Rng,
-) {
-    if t == 0 {
-        model.sample_initials(states, rng);
-    } else {
-        let parents = &ancestors[chunk * CHUNK..chunk * CHUNK + log_obs.len()];
-        model.sample_transitions(t - 1, data.input(t - 1), previous, parents, states, rng);
-    }
-    if missing {
-        log_obs.fill(0.0);
-    } else {
-        model.log_observations(t, data.input(t), data.output(t), states, log_obs);
-    }
-}
-
-/// [`fill_chunk`] as a [`Kernel`], for the parallel path.
-struct ChunkKernel<'a, 's, M> {
+/// What every chunk of step `t` shares.
+struct StepInputs<'a, 's, M> {
     model: &'a M,
     data: &'a Series<'s>,
     t: usize,
     missing: bool,
     previous: &'a [f64],
     ancestors: &'a [usize],
-    chunk: usize,
-    states: &'a mut [f64],
-    log_obs: &'a mut [f64],
-    rng: &'a mut Rng,
 }
 
-impl<M: FilterModel> Kernel for ChunkKernel<'_, '_, M> {
+/// One chunk's work at a step: draw its particles and evaluate their observation
+/// log-densities. A [`Kernel`], so that the parallel path can dispatch each chunk.
+struct ChunkKernel<'k, 'a, 's, M> {
+    step: &'k StepInputs<'a, 's, M>,
+    chunk: usize,
+    states: &'k mut [f64],
+    log_obs: &'k mut [f64],
+    rng: &'k mut Rng,
+}
+
+impl<M: FilterModel> Kernel for ChunkKernel<'_, '_, '_, M> {
     type Output = ();
 
     #[inline(always)]
     fn run(self) {
-        fill_chunk(
-            self.model,
-            self.data,
-            self.t,
-            self.missing,
-            self.previous,
-            self.ancestors,
-            self.chunk,
-            self.states,
-            self.log_obs,
-            self.rng,
-        )
+        let StepInputs {
+            model,
+            data,
+            t,
+            missing,
+            previous,
+            ancestors,
+        } = *self.step;
+        if t == 0 {
+            model.sample_initials(self.states, self.rng);
+        } else {
+            let first = self.chunk * CHUNK;
+            let parents = &ancestors[first..first + self.log_obs.len()];
+            model.sample_transitions(
+                t - 1,
+                data.input(t - 1),
+                previous,
+                parents,
+                self.states,
+                self.rng,
+            );
+        }
+        if missing {
+            self.log_obs.fill(0.0);
+        } else {
+            model.log_observations(t, data.input(t), data.output(t), self.states, self.log_obs);
+        }
     }
 }
 

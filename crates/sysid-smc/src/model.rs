@@ -104,8 +104,12 @@ pub trait TransitionDensity: StateSpace {
     /// `state_dim`). `scratch` is the caller's reusable buffer, for example for the
     /// transition means of `from`.
     ///
-    /// The default calls [`log_transition`](Self::log_transition) per pair; models
-    /// override it to share work across pairs and let the compiler vectorise.
+    /// The default evaluates the kernel of
+    /// [`scalar_gaussian_means`](Self::scalar_gaussian_means) when the model provides
+    /// one (so the two agree by construction), else calls
+    /// [`log_transition`](Self::log_transition) per pair; models override it to share
+    /// work across pairs and let the compiler vectorise.
+    #[inline(always)] // into the smoothers' vector kernels
     fn log_transition_matrix(
         &self,
         t: usize,
@@ -115,7 +119,10 @@ pub trait TransitionDensity: StateSpace {
         out: &mut [f64],
         scratch: &mut Vec<f64>,
     ) {
-        let _ = scratch;
+        if let Some(kernel) = self.scalar_gaussian_means(t, u, from, scratch) {
+            kernel.log_density_matrix(scratch, to, out);
+            return;
+        }
         let n = self.state_dim();
         let m = from.len() / n;
         for (row, next) in out.chunks_exact_mut(m).zip(to.chunks_exact(n)) {
@@ -132,10 +139,11 @@ pub trait TransitionDensity: StateSpace {
     ///
     /// Smoothers that resample with probabilities ∝ `f(x~ | x_i)` then find the
     /// largest candidate in one pass over the means (the nearest one) and evaluate
-    /// single candidates on demand instead of materialising every pair. An override
-    /// must agree bit for bit with
-    /// [`log_transition_matrix`](Self::log_transition_matrix):
-    /// `log f(to_j | from_i) = kernel.log_density(means[i], to_j)`.
+    /// single candidates on demand instead of materialising every pair. It must agree
+    /// bit for bit with [`log_transition_matrix`](Self::log_transition_matrix):
+    /// `log f(to_j | from_i) = kernel.log_density(means[i], to_j)`; the default
+    /// `log_transition_matrix` is built on it, so only a model that overrides both has
+    /// to keep them in step.
     fn scalar_gaussian_means(
         &self,
         t: usize,
@@ -183,6 +191,17 @@ impl ScalarGaussianKernel {
     #[inline(always)]
     pub fn log_density(&self, mean: f64, next: f64) -> f64 {
         self.log_density_at(next - mean)
+    }
+
+    /// `out[j * m + i] = log N(to_j; means[i], v)` for the `m` means: the matrix of
+    /// [`TransitionDensity::log_transition_matrix`].
+    #[inline(always)]
+    pub fn log_density_matrix(&self, means: &[f64], to: &[f64], out: &mut [f64]) {
+        for (row, &next) in out.chunks_exact_mut(means.len()).zip(to) {
+            for (value, &mean) in row.iter_mut().zip(means) {
+                *value = self.log_density(mean, next);
+            }
+        }
     }
 
     /// The log-density at a residual `e = next - mean`; the same bits for `e` and `-e`.

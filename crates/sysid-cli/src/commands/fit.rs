@@ -270,8 +270,10 @@ fn decrease_diagnosis(model: &sysid::kalman::LinearGaussianModel) -> String {
     };
     let singular: Vec<String> = [("Q", model.q()), ("R", model.r())]
         .into_iter()
-        .filter(|(_, m)| m.nrows() > 0 && m.amax() > 0.0 && ratio(m) < 1e-10)
-        .map(|(name, m)| format!("{name} (smallest/largest eigenvalue {:.1e})", ratio(m)))
+        .filter(|(_, m)| m.nrows() > 0 && m.amax() > 0.0)
+        .map(|(name, m)| (name, ratio(m)))
+        .filter(|&(_, r)| r < 1e-10)
+        .map(|(name, r)| format!("{name} (smallest/largest eigenvalue {r:.1e})"))
         .collect();
     if singular.is_empty() {
         "this is a bug, please report it".into()

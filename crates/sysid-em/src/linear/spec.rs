@@ -128,10 +128,13 @@ pub fn floor_variances(cov: DMatrix<f64>, structure: Covariance, floor: f64) -> 
             DMatrix::from_diagonal(&cov.diagonal().map(|v| v.max(floor)))
         }
         Covariance::Full => {
-            if cov.nrows() == 0 || smallest_eigenvalue(&cov) >= floor {
+            if cov.nrows() == 0 {
                 return cov;
             }
-            let eigen = nalgebra::SymmetricEigen::new(cov);
+            let eigen = nalgebra::SymmetricEigen::new(cov.clone());
+            if eigen.eigenvalues.min() >= floor {
+                return cov;
+            }
             let raised = eigen.eigenvalues.map(|v| v.max(floor));
             let mut out = &eigen.eigenvectors
                 * DMatrix::from_diagonal(&raised)
@@ -143,7 +146,7 @@ pub fn floor_variances(cov: DMatrix<f64>, structure: Covariance, floor: f64) -> 
 }
 
 /// The smallest eigenvalue of a symmetric matrix (`+inf` for an empty one).
-pub(super) fn smallest_eigenvalue(m: &DMatrix<f64>) -> f64 {
+fn smallest_eigenvalue(m: &DMatrix<f64>) -> f64 {
     if m.nrows() == 0 {
         return f64::INFINITY;
     }

@@ -57,63 +57,63 @@ pub(crate) fn gather(history: &History, t: usize, indices: &[usize], out: &mut [
     }
 }
 
-/// The walk of one block of paths: its random stream and the indices and states of
-/// its paths at the current step and the one after it.
+/// The walk of one block of paths: its random stream, the indices of its paths at the
+/// current step and the one after it, and where its states sit in the shared buffers.
 struct BlockWalk {
     first_path: usize,
+    /// The block's states in the step buffers of [`run_blocks`].
+    span: std::ops::Range<usize>,
     rng: Rng,
     next_indices: Vec<usize>,
     indices: Vec<usize>,
-    next_states: Vec<f64>,
-    states: Vec<f64>,
 }
 
 impl BlockWalk {
-    /// Block `block` of `paths`, started at the last step from `Cat(W_{T-1})`.
-    fn start(history: &History, paths: usize, block: usize, seed: u64) -> Self {
-        let n = history.state_dim();
+    /// Block `block` of `paths`, started at the last step from `Cat(W_{T-1})`; its
+    /// states go to `span` of the step buffers.
+    fn start(
+        history: &History,
+        paths: usize,
+        block: usize,
+        seed: u64,
+        span: std::ops::Range<usize>,
+    ) -> Self {
         let size = PATH_BLOCK.min(paths - block * PATH_BLOCK);
-        let last = history.steps() - 1;
         let mut rng = stream(seed, block as u64);
-        let final_weights = history.weights(last);
+        let final_weights = history.weights(history.steps() - 1);
         let next_indices: Vec<usize> = (0..size)
             .map(|_| find_cumulative(final_weights, rng.random::<f64>()))
             .collect();
-        let mut next_states = vec![0.0; size * n];
-        gather(history, last, &next_indices, &mut next_states);
         BlockWalk {
             first_path: block * PATH_BLOCK,
+            span,
             rng,
             indices: vec![0; size],
             next_indices,
-            states: vec![0.0; size * n],
-            next_states,
         }
     }
 
-    /// One step back, from `t + 1` to `t`.
+    /// One step back, from `t + 1` (states `next_states`) to `t` (into `states`); the
+    /// step buffers hold every block's states.
     fn step_back<S: BackwardStep>(
         &mut self,
         history: &History,
         t: usize,
         step: &mut S,
+        next_states: &[f64],
+        states: &mut [f64],
     ) -> Result<(), SmcError> {
         step.step(
             t,
-            &self.next_states,
+            &next_states[self.span.clone()],
             &self.next_indices,
             &mut self.indices,
             &mut self.rng,
         )
         .map_err(|e| offset_path(e, self.first_path))?;
-        gather(history, t, &self.indices, &mut self.states);
-        Ok(())
-    }
-
-    /// Makes step `t` the step after the next one back.
-    fn advance(&mut self) {
-        std::mem::swap(&mut self.states, &mut self.next_states);
+        gather(history, t, &self.indices, &mut states[self.span.clone()]);
         std::mem::swap(&mut self.indices, &mut self.next_indices);
+        Ok(())
     }
 }
 
@@ -131,23 +131,31 @@ fn run_blocks<S: BackwardStep>(
     step: &mut S,
     sink: &mut impl FnMut(usize, &[f64], Option<&[f64]>),
 ) -> Result<(), SmcError> {
+    let n = history.state_dim();
     let last = history.steps() - 1;
+    let first_path = blocks.start * PATH_BLOCK;
     let mut walks: Vec<BlockWalk> = blocks
-        .map(|block| BlockWalk::start(history, paths, block, seed))
+        .map(|block| {
+            let from = (block * PATH_BLOCK - first_path) * n;
+            let to = (((block + 1) * PATH_BLOCK).min(paths) - first_path) * n;
+            BlockWalk::start(history, paths, block, seed, from..to)
+        })
         .collect();
-    let mut next_states: Vec<f64> = walks
-        .iter()
-        .flat_map(|w| w.next_states.iter().copied())
-        .collect();
-    let mut states = vec![0.0; next_states.len()];
+    let len = walks.last().map_or(0, |w| w.span.end);
+    let mut next_states = vec![0.0; len];
+    let mut states = vec![0.0; len];
+    for walk in &walks {
+        gather(
+            history,
+            last,
+            &walk.next_indices,
+            &mut next_states[walk.span.clone()],
+        );
+    }
     sink(last, &next_states, None);
     for t in (0..last).rev() {
-        let mut offset = 0;
         for walk in walks.iter_mut() {
-            walk.step_back(history, t, step)?;
-            states[offset..offset + walk.states.len()].copy_from_slice(&walk.states);
-            offset += walk.states.len();
-            walk.advance();
+            walk.step_back(history, t, step, &next_states, &mut states)?;
         }
         sink(t, &states, Some(&next_states));
         std::mem::swap(&mut states, &mut next_states);

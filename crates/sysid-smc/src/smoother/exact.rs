@@ -123,6 +123,7 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
         let resampled = self.cloud == Cloud::Resampled && self.history.resampled_after(t);
         // the blocks walk in lockstep: the cloud (and its means) serve all of them
         let fresh = self.cloud_step != Some(t);
+        self.cloud_step = resampled.then_some(t);
         if resampled && fresh {
             self.gathered.resize(m * n, 0.0);
             gather(
@@ -145,7 +146,6 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
                     .scalar_gaussian_means(t, self.data.input(t), cloud, &mut self.means)
                     .filter(ScalarGaussianKernel::is_proper);
             }
-            self.cloud_step = Some(t);
             if let Some(kernel) = self.kernel {
                 let ancestors = self.history.ancestors(t + 1);
                 return nearest::draw_block(
@@ -162,7 +162,6 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
                 );
             }
         }
-        self.cloud_step = resampled.then_some(t);
         self.matrix.resize(out.len() * m, 0.0);
         self.model.log_transition_matrix(
             t,

@@ -22,11 +22,11 @@ pub(crate) struct RejectStep<'a, M> {
     /// The proposal table of the step being walked, built when the step changes
     /// (blocks walk in lockstep, so once per step for all of them).
     pub proposal: ProposalTable,
-    /// For scalar Gaussian transitions: the transition means of step `means_step`'s
-    /// particles and the kernel, computed once per step (vectorised) instead of once
-    /// per trial.
+    /// For scalar Gaussian transitions: the transition means of the proposal table's
+    /// step and the kernel, computed with the table (vectorised) instead of once per
+    /// trial.
     pub means: Vec<f64>,
-    pub means_step: Option<(usize, Option<ScalarGaussianKernel>)>,
+    pub kernel: Option<ScalarGaussianKernel>,
     pub stats: SmootherStats,
 }
 
@@ -46,7 +46,7 @@ impl<'a, M> RejectStep<'a, M> {
             scratch: Vec::new(),
             proposal: ProposalTable::default(),
             means: Vec::new(),
-            means_step: None,
+            kernel: None,
             stats: SmootherStats::default(),
         }
     }
@@ -65,10 +65,10 @@ pub(crate) struct ProposalTable {
 }
 
 impl ProposalTable {
-    /// Makes the table that of step `t` (nothing to do when it already is).
-    fn prepare(&mut self, history: &History, t: usize) {
+    /// Makes the table that of step `t`; `false` when it already was.
+    fn prepare(&mut self, history: &History, t: usize) -> bool {
         if self.step == Some(t) {
-            return;
+            return false;
         }
         let weights = history.weights(t);
         let mut acc = 0.0;
@@ -81,6 +81,7 @@ impl ProposalTable {
         self.guide.resize(weights.len(), 0);
         systematic_from_cumulative(&self.cumulative, self.last_positive, 0.0, &mut self.guide);
         self.step = Some(t);
+        true
     }
 
     /// Draws `i ~ Cat(W_t)` from a uniform in [0, 1).
@@ -117,21 +118,16 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
         let states = self.history.states(t);
         let log_bound = self.model.log_transition_bound(t, u);
         let log_f = self.model.log_transition_at(t, u);
-        self.proposal.prepare(self.history, t);
-        let kernel = match self.means_step {
-            Some((step, kernel)) if step == t => kernel,
-            _ => {
-                let kernel = if n == 1 {
-                    self.model
-                        .scalar_gaussian_means(t, u, states, &mut self.means)
-                        .filter(ScalarGaussianKernel::is_proper)
-                } else {
-                    None
-                };
-                self.means_step = Some((t, kernel));
-                kernel
-            }
-        };
+        if self.proposal.prepare(self.history, t) {
+            self.kernel = if n == 1 {
+                self.model
+                    .scalar_gaussian_means(t, u, states, &mut self.means)
+                    .filter(ScalarGaussianKernel::is_proper)
+            } else {
+                None
+            };
+        }
+        let kernel = self.kernel;
         'paths: for (k, (next, slot)) in next_states.chunks_exact(n).zip(out.iter_mut()).enumerate()
         {
             for _ in 0..self.max_trials {

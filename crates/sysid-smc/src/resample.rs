@@ -13,6 +13,8 @@
 use rand::RngExt;
 use rand_distr::{Distribution, Exp1};
 
+use crate::weights::blocked_total;
+
 /// The resampling scheme of a particle filter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Resampling {
@@ -100,7 +102,8 @@ fn assign_sorted(weights: &[f64], positions: impl Iterator<Item = f64>, out: &mu
 #[inline(always)]
 pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
     let n = out.len();
-    let total: f64 = weights.iter().sum();
+    // Block sums: no serial chain of additions (the running sums below are one).
+    let total = blocked_total(weights);
     let scale = n as f64 / total;
     // out[k] = (largest i with count_i <= k) + 1: mark each count with i + 1 (counts
     // grow with i, so the last write wins) and take a running maximum. Plain stores,
@@ -115,10 +118,9 @@ pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
     running_max(out);
 }
 
-/// [`systematic`] from the running sums `cumulative[i] = w_0 + ... + w_i` (added in that
-/// order, so that the last one is the total) and the index `last` of the last positive
-/// weight: the same ancestors, bit for bit, without [`systematic`]'s two sequential
-/// sums, for callers that keep the running sums anyway.
+/// Systematic resampling from the running sums `cumulative[i] = w_0 + ... + w_i` (added
+/// in that order; the last one is taken as the total) and the index `last` of the last
+/// positive weight, for callers that keep the running sums anyway.
 #[inline(always)]
 pub(crate) fn systematic_from_cumulative(
     cumulative: &[f64],
@@ -226,8 +228,7 @@ mod tests {
     /// Systematic resampling by its definition: position `k` goes to the number of
     /// particles `i < last` whose count `ceil(n C_i / total - u)` is at most `k`
     /// (O(n M), the same floating-point operations).
-    fn systematic_by_definition(weights: &[f64], u: f64, n: usize) -> Vec<usize> {
-        let total: f64 = weights.iter().sum();
+    fn systematic_by_definition(weights: &[f64], total: f64, u: f64, n: usize) -> Vec<usize> {
         let scale = n as f64 / total;
         let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
         let mut cumulative = 0.0;
@@ -264,7 +265,12 @@ mod tests {
             let u = rng.random::<f64>();
             let mut out = vec![usize::MAX; n];
             systematic(&weights, u, &mut out);
-            assert_eq!(out, systematic_by_definition(&weights, u, n), "case {case}");
+            let total = blocked_total(&weights);
+            assert_eq!(
+                out,
+                systematic_by_definition(&weights, total, u, n),
+                "case {case}"
+            );
             let mut cumulative = Vec::new();
             let mut acc = 0.0;
             cumulative.extend(weights.iter().map(|w| {
@@ -274,7 +280,12 @@ mod tests {
             let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
             let mut from_sums = vec![usize::MAX; n];
             systematic_from_cumulative(&cumulative, last, u, &mut from_sums);
-            assert_eq!(from_sums, out, "case {case}");
+            let serial_total = cumulative[m - 1];
+            assert_eq!(
+                from_sums,
+                systematic_by_definition(&weights, serial_total, u, n),
+                "case {case}"
+            );
         }
     }
 

@@ -118,25 +118,6 @@ pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
     running_max(out);
 }
 
-/// Systematic resampling from the running sums `cumulative[i] = w_0 + ... + w_i` (added
-/// in that order; the last one is taken as the total) and the index `last` of the last
-/// positive weight, for callers that keep the running sums anyway.
-#[inline(always)]
-pub(crate) fn systematic_from_cumulative(
-    cumulative: &[f64],
-    last: usize,
-    u: f64,
-    out: &mut [usize],
-) {
-    let n = out.len();
-    let scale = n as f64 / cumulative[cumulative.len() - 1];
-    out.fill(0);
-    for (i, &c) in cumulative[..last].iter().enumerate() {
-        mark_count(c, i, scale, u, out);
-    }
-    running_max(out);
-}
-
 /// Marks `out[count] = i + 1` for `count = ceil(cumulative * scale - u)` (clamped at 0;
 /// nothing when it is `out.len()` or more).
 #[inline(always)]
@@ -269,21 +250,6 @@ mod tests {
             assert_eq!(
                 out,
                 systematic_by_definition(&weights, total, u, n),
-                "case {case}"
-            );
-            let mut cumulative = Vec::new();
-            let mut acc = 0.0;
-            cumulative.extend(weights.iter().map(|w| {
-                acc += w;
-                acc
-            }));
-            let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
-            let mut from_sums = vec![usize::MAX; n];
-            systematic_from_cumulative(&cumulative, last, u, &mut from_sums);
-            let serial_total = cumulative[m - 1];
-            assert_eq!(
-                from_sums,
-                systematic_by_definition(&weights, serial_total, u, n),
                 "case {case}"
             );
         }

@@ -2,8 +2,9 @@
 
 use rand_distr::{Distribution, StandardNormal};
 use sysid_smc::{
-    Ffbsi, FilterOptions, InitialSampler, ObservationDensity, ParticleFilter, Series, SmcError,
-    Smoother, StateSpace, Tanizaki, TransitionDensity, TransitionSampler,
+    Ffbsi, FfbsiReject, FilterOptions, InitialSampler, ObservationDensity, ParticleFilter, Series,
+    SmcError, Smoother, StateSpace, Tanizaki, TransitionBound, TransitionDensity,
+    TransitionSampler,
 };
 
 /// A random walk observed through a bounded sensor: `y_t` in [x - 1, x + 1] uniformly,
@@ -52,6 +53,13 @@ impl TransitionDensity for BoundedSensor {
     fn log_transition(&self, _: usize, x: &[f64], _: &[f64], next: &[f64]) -> f64 {
         let e = (next[0] - x[0]) / 0.1;
         -0.5 * e * e
+    }
+}
+
+/// A wrong bound: the log-density reaches 0 where `next = x`.
+impl TransitionBound for BoundedSensor {
+    fn log_transition_bound(&self, _: usize, _: &[f64]) -> f64 {
+        -1.0
     }
 }
 
@@ -197,4 +205,33 @@ fn smoothers_check_paths_and_history_length() {
     let mut no_history = filter(20, false);
     no_history.run(&model, &data, 1).unwrap();
     assert!(no_history.history().is_none());
+}
+
+#[test]
+fn a_transition_bound_below_the_density_is_a_typed_error() {
+    let y = [0.0, 0.1, 0.2, 0.1];
+    let data = Series::new(&y, 1).unwrap();
+    let model = BoundedSensor { nan_at: None };
+    let mut pf = filter(50, true);
+    pf.run(&model, &data, 1).unwrap();
+    let err = FfbsiReject {
+        paths: 40,
+        max_trials: None,
+        parallel: false,
+    }
+    .trajectories(&model, pf.history().unwrap(), &data, 1)
+    .unwrap_err();
+    // the first step walked back is t = 2; every trial's log-density there is above -1
+    // for the nearby particles, so some trial of the block sees it
+    match err {
+        SmcError::BoundViolated {
+            t,
+            log_density,
+            log_bound,
+        } => {
+            assert_eq!((t, log_bound), (2, -1.0));
+            assert!(log_density > -1.0 && log_density <= 0.0, "{log_density}");
+        }
+        other => panic!("{other:?}"),
+    }
 }

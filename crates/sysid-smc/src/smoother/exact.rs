@@ -3,15 +3,15 @@
 use rand::RngExt;
 
 use super::SmootherStats;
-use super::backward::{BackwardStep, backward_error, gather};
+use super::backward::{BackwardStep, PATH_BLOCK, backward_error, gather};
 use super::nearest;
+use super::rounds::{draw_in_rounds, uniform_index};
 use crate::model::{ScalarGaussianKernel, TransitionDensity};
 use crate::simd::Kernel;
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{DrawFailure, checked_row_max, draw_from_weights, shift_rows_by_max};
 use crate::{History, Series, SmcError};
-use rand_distr::{Distribution, Exp1};
 
 /// Which filter cloud the backward kernel draws from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,9 +29,10 @@ pub(crate) enum Cloud {
 /// With `rejection_trials = Some(k)` each draw first tries up to `k` times to propose
 /// `i` uniformly and accept it with probability `W_t^i f_i / max_j (W_t^j f_j)`
 /// (rejection against the row's own maximum: one Exp(1) variate per trial instead of
-/// one exponential per candidate), then falls back to the exact draw. Both routes sample exactly
-/// the same distribution; the first is several times cheaper when the candidates'
-/// densities are of similar size.
+/// one exponential per candidate; the block's rows in rounds, see [`super::rounds`]),
+/// then falls back to the exact draw. Both routes sample exactly the same distribution;
+/// the first is several times cheaper when the candidates' densities are of similar
+/// size.
 pub(crate) struct ExactStep<'a, M> {
     pub model: &'a M,
     pub history: &'a History,
@@ -199,37 +200,33 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
             self.stats.density_evaluations += (out.len() * m) as u64;
             return Ok(());
         };
-        for (k, (row, slot)) in self
-            .matrix
-            .chunks_exact_mut(m)
-            .zip(out.iter_mut())
-            .enumerate()
-        {
-            let max = checked_row_max(row).map_err(|f| backward_error(f, t, k))?;
+        let rows = out.len();
+        let mut max = [0.0; PATH_BLOCK];
+        for (k, row) in self.matrix.chunks_exact(m).enumerate() {
+            max[k] = checked_row_max(row).map_err(|f| backward_error(f, t, k))?;
             // proposals may never visit a NaN entry: look for one explicitly
             if row.iter().fold(false, |nan, v| nan | v.is_nan()) {
                 return Err(backward_error(DrawFailure::Invalid, t, k));
             }
-            let mut accepted = None;
-            for _ in 0..trials {
-                self.stats.trials += 1;
-                let i = ((rng.random::<f64>() * m as f64) as usize).min(m - 1);
-                // accept with probability exp(l_i - max): -ln U ~ Exp(1), so no exp
-                let e: f64 = Exp1.sample(rng);
-                if row[i] - max > -e {
-                    accepted = Some(i);
-                    break;
-                }
-            }
-            let i = match accepted {
-                Some(i) => i,
-                None => {
-                    self.stats.fallbacks += 1;
-                    exp_shifted_sum(row, max);
-                    draw_from_weights(row, rng.random())
-                        .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?
-                }
-            };
+        }
+        let mut chosen = [0; PATH_BLOCK];
+        let matrix = &self.matrix;
+        let open = draw_in_rounds(
+            trials,
+            rng,
+            |u| uniform_index(u, m),
+            |k, i| matrix[k * m + i] - max[k],
+            &mut chosen[..rows],
+        );
+        self.stats.trials += open.trials;
+        for k in open.rows() {
+            self.stats.fallbacks += 1;
+            let row = &mut self.matrix[k * m..(k + 1) * m];
+            exp_shifted_sum(row, max[k]);
+            chosen[k] = draw_from_weights(row, rng.random())
+                .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
+        }
+        for (slot, &i) in out.iter_mut().zip(&chosen[..rows]) {
             *slot = pick(i);
         }
         self.stats.density_evaluations += (out.len() * m) as u64;

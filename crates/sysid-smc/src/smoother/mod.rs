@@ -30,12 +30,14 @@
 //! [`TransitionDensity`]: crate::TransitionDensity
 //! [`TransitionBound`]: crate::TransitionBound
 
+mod alias;
 mod backward;
 mod exact;
 mod genealogy;
 mod nearest;
 mod paths;
 mod reject;
+mod rounds;
 
 pub use backward::PATH_BLOCK;
 pub use paths::{AdditiveFunctional, Trajectories};
@@ -198,7 +200,7 @@ pub struct Tanizaki {
     /// Draw blocks of paths in parallel (same result either way).
     pub parallel: bool,
     /// Rejection trials per draw before the exact draw; `None` means
-    /// `max(2, M / 8)` (about the cost of one exact draw), `Some(0)` always draws
+    /// `max(2, M / 4)` (about the cost of one exact draw), `Some(0)` always draws
     /// exactly.
     pub max_trials: Option<usize>,
 }
@@ -212,7 +214,7 @@ impl Tanizaki {
     ) -> ExactStep<'a, M> {
         let trials = self
             .max_trials
-            .unwrap_or_else(|| (history.particles() / 8).max(2));
+            .unwrap_or_else(|| (history.particles() / 4).max(2));
         let mut step = ExactStep::new(model, history, data, Cloud::Resampled);
         step.rejection_trials = (trials > 0).then_some(trials);
         step

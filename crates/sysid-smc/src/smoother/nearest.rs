@@ -17,10 +17,10 @@
 //! kernel evaluates all `M` densities of every draw.
 
 use rand::RngExt;
-use rand_distr::{Distribution, Exp1};
 
 use super::SmootherStats;
 use super::backward::{PATH_BLOCK, backward_error};
+use super::rounds::{draw_in_rounds, uniform_index};
 use crate::SmcError;
 use crate::model::ScalarGaussianKernel;
 use crate::streams::Rng;
@@ -77,42 +77,39 @@ pub(crate) fn draw_block(
     let rows = next_states.len();
     debug_assert!(rows <= PATH_BLOCK, "a block has at most PATH_BLOCK paths");
     nearest_distances(means, next_states, &mut nearest[..rows], &mut nan[..rows]);
-    for (k, (&next, slot)) in next_states.iter().zip(out.iter_mut()).enumerate() {
-        let (nearest, nan) = (nearest[k], nan[k]);
+    let mut max = [0.0; PATH_BLOCK];
+    for k in 0..rows {
         // the same number as the largest of the row's log-densities
-        let max = kernel.log_density_at(nearest);
-        if max == f64::NEG_INFINITY {
+        let row_max = kernel.log_density_at(nearest[k]);
+        if row_max == f64::NEG_INFINITY {
             return Err(backward_error(DrawFailure::Degenerate, t, k));
         }
-        if nan || max.is_nan() || max == f64::INFINITY {
+        if nan[k] || row_max.is_nan() || row_max == f64::INFINITY {
             return Err(backward_error(DrawFailure::Invalid, t, k));
         }
-        stats.density_evaluations += 1;
-        let mut accepted = None;
-        let mut used = 0;
-        while used < trials {
-            used += 1;
-            let i = ((rng.random::<f64>() * m as f64) as usize).min(m - 1);
-            let e: f64 = Exp1.sample(rng);
-            if kernel.log_density(means[i], next) - max > -e {
-                accepted = Some(i);
-                break;
-            }
-        }
-        stats.trials += used as u64;
-        stats.density_evaluations += used as u64;
-        let i = match accepted {
-            Some(i) => i,
-            None => {
-                stats.fallbacks += 1;
-                stats.density_evaluations += m as u64;
-                row.clear();
-                row.extend(means.iter().map(|&mean| kernel.log_density(mean, next)));
-                exp_shifted_sum(row, max);
-                draw_from_weights(row, rng.random())
-                    .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?
-            }
-        };
+        max[k] = row_max;
+    }
+    let mut chosen = [0; PATH_BLOCK];
+    let open = draw_in_rounds(
+        trials,
+        rng,
+        |u| uniform_index(u, m),
+        |k, i| kernel.log_density(means[i], next_states[k]) - max[k],
+        &mut chosen[..rows],
+    );
+    stats.trials += open.trials;
+    stats.density_evaluations += rows as u64 + open.trials;
+    for k in open.rows() {
+        let next = next_states[k];
+        stats.fallbacks += 1;
+        stats.density_evaluations += m as u64;
+        row.clear();
+        row.extend(means.iter().map(|&mean| kernel.log_density(mean, next)));
+        exp_shifted_sum(row, max[k]);
+        chosen[k] = draw_from_weights(row, rng.random())
+            .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
+    }
+    for (slot, &i) in out.iter_mut().zip(&chosen[..rows]) {
         *slot = pick(i);
     }
     Ok(())

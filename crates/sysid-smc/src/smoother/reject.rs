@@ -1,13 +1,24 @@
 //! FFBSi with rejection sampling (Douc, Garivier, Moulines and Olsson 2011), with the
 //! number of trials capped and an exact fallback draw (Dau and Chopin 2023).
+//!
+//! # Algorithm
+//! For a block of paths at step `t`, each trial proposes `i ~ Cat(W_t)` from an alias
+//! table of the step's weights and accepts it with probability `f(x~ | x_t^i) / c`,
+//! where `log c` is the model's [`TransitionBound`]; the trials run in rounds over the
+//! block's open paths ([`super::rounds`]). A density above the bound is reported as
+//! [`SmcError::BoundViolated`] once the block's rounds are done. Paths still open
+//! after `max_trials` draw exactly from `W_t^i f(x~ | x_t^i)`.
+//!
+//! # Complexity
+//! O(M) per step for the table, about `c / E[f]` trials per path, O(M) per fallback.
 
 use rand::RngExt;
-use rand_distr::{Distribution, Exp1};
 
 use super::SmootherStats;
-use super::backward::{BackwardStep, backward_error};
+use super::alias::AliasTable;
+use super::backward::{BackwardStep, PATH_BLOCK, backward_error};
+use super::rounds::draw_in_rounds;
 use crate::model::{ScalarGaussianKernel, TransitionBound};
-use crate::resample::systematic_from_cumulative;
 use crate::streams::Rng;
 use crate::weights::draw_from_log_weights;
 use crate::{History, Series, SmcError};
@@ -52,16 +63,13 @@ impl<'a, M> RejectStep<'a, M> {
     }
 }
 
-/// A table for O(1) expected draws from `Cat(W_t)` at one step: the cumulative weights
-/// and a guide table (Chen and Asau 1974), `guide[j]` = the first particle whose
-/// cumulative weight exceeds `j / M` of the total. Built in O(M) when the step changes;
-/// it stays in the cache while the blocks' trials hit it at random.
+/// The proposal `Cat(W_t)` of the step being walked: an alias table, built in O(M)
+/// when the step changes; it stays in the cache while the blocks' trials hit it at
+/// random.
 #[derive(Default)]
 pub(crate) struct ProposalTable {
     step: Option<usize>,
-    cumulative: Vec<f64>,
-    guide: Vec<usize>,
-    last_positive: usize,
+    table: AliasTable,
 }
 
 impl ProposalTable {
@@ -70,36 +78,15 @@ impl ProposalTable {
         if self.step == Some(t) {
             return false;
         }
-        let weights = history.weights(t);
-        let mut acc = 0.0;
-        self.cumulative.clear();
-        self.cumulative.extend(weights.iter().map(|w| {
-            acc += w;
-            acc
-        }));
-        self.last_positive = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
-        self.guide.resize(weights.len(), 0);
-        systematic_from_cumulative(&self.cumulative, self.last_positive, 0.0, &mut self.guide);
+        self.table.build(history.weights(t));
         self.step = Some(t);
         true
     }
 
     /// Draws `i ~ Cat(W_t)` from a uniform in [0, 1).
-    #[inline]
+    #[inline(always)]
     fn draw(&self, uniform: f64) -> usize {
-        let cumulative = &self.cumulative[..];
-        let m = cumulative.len();
-        let target = uniform * cumulative[m - 1];
-        let j = ((uniform * m as f64) as usize).min(m - 1);
-        let last = self.last_positive;
-        let mut i = self.guide[j].min(last);
-        while i > 0 && cumulative[i - 1] > target {
-            i -= 1;
-        }
-        while i < last && cumulative[i] <= target {
-            i += 1;
-        }
-        i
+        self.table.draw(uniform)
     }
 }
 
@@ -128,42 +115,55 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
             };
         }
         let kernel = self.kernel;
-        'paths: for (k, (next, slot)) in next_states.chunks_exact(n).zip(out.iter_mut()).enumerate()
-        {
-            for _ in 0..self.max_trials {
-                let i = self.proposal.draw(rng.random());
-                let value = match kernel {
-                    Some(kernel) => kernel.log_density(self.means[i], next[0]),
-                    None => log_f(&states[i * n..(i + 1) * n], next),
-                };
-                self.stats.trials += 1;
-                self.stats.density_evaluations += 1;
+        let (means, proposal) = (&self.means, &self.proposal);
+        let log_density = |k: usize, i: usize| match kernel {
+            Some(kernel) => kernel.log_density(means[i], next_states[k]),
+            None => log_f(
+                &states[i * n..(i + 1) * n],
+                &next_states[k * n..(k + 1) * n],
+            ),
+        };
+        // the largest log-density above the bound, if any (the model's bound is wrong)
+        let violation = std::cell::Cell::new(f64::NEG_INFINITY);
+        let mut chosen = [0; PATH_BLOCK];
+        let rows = out.len();
+        let open = draw_in_rounds(
+            self.max_trials,
+            rng,
+            |u| proposal.draw(u),
+            |k, i| {
+                let value = log_density(k, i);
                 if value > log_bound {
-                    return Err(SmcError::BoundViolated {
-                        t,
-                        log_density: value,
-                        log_bound,
-                    });
+                    violation.set(violation.get().max(value));
                 }
-                // Accept with probability exp(value - log_bound): an Exp(1) variable
-                // exceeds log_bound - value with exactly that probability.
-                let e: f64 = Exp1.sample(rng);
-                if e > log_bound - value {
-                    *slot = i;
-                    continue 'paths;
-                }
-            }
+                // accepted with probability exp(value - log_bound)
+                value - log_bound
+            },
+            &mut chosen[..rows],
+        );
+        self.stats.trials += open.trials;
+        self.stats.density_evaluations += open.trials;
+        if violation.get() > log_bound {
+            return Err(SmcError::BoundViolated {
+                t,
+                log_density: violation.get(),
+                log_bound,
+            });
+        }
+        for k in open.rows() {
             self.stats.fallbacks += 1;
             self.stats.density_evaluations += m as u64;
             self.row.resize(m, 0.0);
+            let next = &next_states[k * n..(k + 1) * n];
             self.model
                 .log_transition_matrix(t, u, states, next, &mut self.row, &mut self.scratch);
             for (l, &lw) in self.row.iter_mut().zip(self.history.log_weights(t)) {
                 *l += lw;
             }
-            *slot = draw_from_log_weights(&mut self.row, rng.random())
+            chosen[k] = draw_from_log_weights(&mut self.row, rng.random())
                 .map_err(|f| backward_error(f, t, k))?;
         }
+        out.copy_from_slice(&chosen[..rows]);
         Ok(())
     }
 

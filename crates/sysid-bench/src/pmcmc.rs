@@ -146,9 +146,8 @@ pub fn run(reps: usize) {
         .collect();
     let serial = median(pairs.iter().map(|p| p.0).collect());
     let parallel = median(pairs.iter().map(|p| p.1).collect());
-    let ratios: Vec<f64> = pairs.iter().map(|(s, p)| s / p).collect();
-    let lowest = ratios.iter().copied().fold(f64::INFINITY, f64::min);
-    let highest = ratios.iter().copied().fold(0.0, f64::max);
+    let mut ratios: Vec<f64> = pairs.iter().map(|(s, p)| s / p).collect();
+    let (_, lowest, highest) = crate::summary(&mut ratios);
     emit(
         &json!({"task": "pmmh_chains_throughput", "params": {"system": "nlbench", "chains": 2, "iterations": iterations, "M": 100, "reps": reps},
         "seconds_1_thread": serial, "seconds_2_threads": parallel, "speedup": serial / parallel,

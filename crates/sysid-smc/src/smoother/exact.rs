@@ -200,7 +200,6 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
             self.stats.density_evaluations += (out.len() * m) as u64;
             return Ok(());
         };
-        let rows = out.len();
         let mut max = [0.0; PATH_BLOCK];
         for (k, row) in self.matrix.chunks_exact(m).enumerate() {
             max[k] = checked_row_max(row).map_err(|f| backward_error(f, t, k))?;
@@ -209,25 +208,24 @@ impl<M: TransitionDensity> ExactStep<'_, M> {
                 return Err(backward_error(DrawFailure::Invalid, t, k));
             }
         }
-        let mut chosen = [0; PATH_BLOCK];
         let matrix = &self.matrix;
         let open = draw_in_rounds(
             trials,
             rng,
             |u| uniform_index(u, m),
             |k, i| matrix[k * m + i] - max[k],
-            &mut chosen[..rows],
+            out,
         );
         self.stats.trials += open.trials;
         for k in open.rows() {
             self.stats.fallbacks += 1;
             let row = &mut self.matrix[k * m..(k + 1) * m];
             exp_shifted_sum(row, max[k]);
-            chosen[k] = draw_from_weights(row, rng.random())
+            out[k] = draw_from_weights(row, rng.random())
                 .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
         }
-        for (slot, &i) in out.iter_mut().zip(&chosen[..rows]) {
-            *slot = pick(i);
+        for slot in out.iter_mut() {
+            *slot = pick(*slot);
         }
         self.stats.density_evaluations += (out.len() * m) as u64;
         Ok(())

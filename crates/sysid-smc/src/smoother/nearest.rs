@@ -89,13 +89,12 @@ pub(crate) fn draw_block(
         }
         max[k] = row_max;
     }
-    let mut chosen = [0; PATH_BLOCK];
     let open = draw_in_rounds(
         trials,
         rng,
         |u| uniform_index(u, m),
         |k, i| kernel.log_density(means[i], next_states[k]) - max[k],
-        &mut chosen[..rows],
+        out,
     );
     stats.trials += open.trials;
     stats.density_evaluations += rows as u64 + open.trials;
@@ -106,11 +105,11 @@ pub(crate) fn draw_block(
         row.clear();
         row.extend(means.iter().map(|&mean| kernel.log_density(mean, next)));
         exp_shifted_sum(row, max[k]);
-        chosen[k] = draw_from_weights(row, rng.random())
+        out[k] = draw_from_weights(row, rng.random())
             .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
     }
-    for (slot, &i) in out.iter_mut().zip(&chosen[..rows]) {
-        *slot = pick(i);
+    for slot in out.iter_mut() {
+        *slot = pick(*slot);
     }
     Ok(())
 }

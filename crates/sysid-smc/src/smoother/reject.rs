@@ -16,7 +16,7 @@ use rand::RngExt;
 
 use super::SmootherStats;
 use super::alias::AliasTable;
-use super::backward::{BackwardStep, PATH_BLOCK, backward_error};
+use super::backward::{BackwardStep, backward_error};
 use super::rounds::draw_in_rounds;
 use crate::model::{ScalarGaussianKernel, TransitionBound};
 use crate::streams::Rng;
@@ -124,9 +124,7 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
             ),
         };
         // the largest log-density above the bound, if any (the model's bound is wrong)
-        let violation = std::cell::Cell::new(f64::NEG_INFINITY);
-        let mut chosen = [0; PATH_BLOCK];
-        let rows = out.len();
+        let mut violation = f64::NEG_INFINITY;
         let open = draw_in_rounds(
             self.max_trials,
             rng,
@@ -134,19 +132,19 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
             |k, i| {
                 let value = log_density(k, i);
                 if value > log_bound {
-                    violation.set(violation.get().max(value));
+                    violation = violation.max(value);
                 }
                 // accepted with probability exp(value - log_bound)
                 value - log_bound
             },
-            &mut chosen[..rows],
+            out,
         );
         self.stats.trials += open.trials;
         self.stats.density_evaluations += open.trials;
-        if violation.get() > log_bound {
+        if violation > log_bound {
             return Err(SmcError::BoundViolated {
                 t,
-                log_density: violation.get(),
+                log_density: violation,
                 log_bound,
             });
         }
@@ -160,10 +158,9 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
             for (l, &lw) in self.row.iter_mut().zip(self.history.log_weights(t)) {
                 *l += lw;
             }
-            chosen[k] = draw_from_log_weights(&mut self.row, rng.random())
+            out[k] = draw_from_log_weights(&mut self.row, rng.random())
                 .map_err(|f| backward_error(f, t, k))?;
         }
-        out.copy_from_slice(&chosen[..rows]);
         Ok(())
     }
 

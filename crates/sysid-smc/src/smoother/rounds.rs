@@ -48,7 +48,7 @@ pub(crate) fn draw_in_rounds(
     trials: usize,
     rng: &mut Rng,
     propose: impl Fn(f64) -> usize,
-    log_ratio: impl Fn(usize, usize) -> f64,
+    mut log_ratio: impl FnMut(usize, usize) -> f64,
     chosen: &mut [usize],
 ) -> OpenRows {
     let rows = chosen.len();

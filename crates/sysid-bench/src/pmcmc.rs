@@ -5,19 +5,23 @@
 //! - `pgas_iteration`, `pgas_guided_iteration`: one particle-Gibbs iteration (ancestor
 //!   sampling, bootstrap or guided proposal, M = 10, T = 1000)
 //!   on `lgss` with the conjugate step;
-//! - `pmmh_chains_throughput`: 2 chains on 1 and on 2 threads, `reps` alternating pairs
-//!   (the speed-up of the median times, and the range of the pairs' ratios);
+//! - `pmmh_chains_throughput`: 2 and 8 chains on 1 and on 2 threads, `reps` alternating
+//!   pairs (the speed-up of the median times, the range of the pairs' ratios, the
+//!   chains' own summed durations on 2 threads over 1 thread, which shows contention,
+//!   and the wall time over half the summed durations, which shows the wait for the
+//!   slower thread);
 //! - `pmcmc_lgss_posterior`: PMMH and PGAS posterior means and sds of (phi, q, r) on an
 //!   `lgss` record of T = 100 against an exact-likelihood (Kalman) Metropolis chain,
 //!   with the ESS of each.
 
 use crate::emit;
 use serde_json::json;
+use std::sync::Mutex;
 use std::time::Instant;
 use sysid::models::{LgssConjugate, LgssFamily, Nlbench, NlbenchFamily, System};
 use sysid::pmcmc::{
-    CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior,
-    effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
+    ChainObserver, CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions,
+    ScalarPrior, effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
 };
 use sysid::smc::Series;
 
@@ -75,20 +79,25 @@ pub fn run(reps: usize) {
         particles: 100,
         ..Default::default()
     };
-    let run_pmmh = |chains: usize, seed: u64| {
+    let run_pmmh = |chains: usize, iterations: usize, seed: u64, observer: &dyn ChainObserver| {
         pmmh(
             &family,
             &nl_prior,
             &nl,
             &family.truth(),
-            &pmmh_options,
+            &PmmhOptions {
+                iterations,
+                ..pmmh_options.clone()
+            },
             chains,
             seed,
-            &(),
+            observer,
         )
         .expect("runs");
     };
-    let pmmh_ms = ms_per_iteration(reps, iterations, |r| one.install(|| run_pmmh(1, r)));
+    let pmmh_ms = ms_per_iteration(reps, iterations, |r| {
+        one.install(|| run_pmmh(1, iterations, r, &()))
+    });
     emit(
         &json!({"task": "pmmh_iteration", "params": {"system": "nlbench", "T": 1000, "M": 100, "threads": 1},
         "ms_median": pmmh_ms, "target_ms": 2.0, "met": pmmh_ms <= 2.0}),
@@ -132,32 +141,86 @@ pub fn run(reps: usize) {
         );
     }
 
-    // Throughput of 2 chains on 1 and 2 threads: `reps` pairs of runs, the two settings
+    // Throughput of C chains on 1 and 2 threads: `reps` pairs of runs, the two settings
     // alternating so that both see the machine's current mode; the speed-up is the
-    // ratio of the medians, and the per-pair ratios give its range.
+    // ratio of the medians, and the per-pair ratios give its range. Each chain's own
+    // duration separates contention (a chain running slower beside another) from
+    // waiting for the slower thread at the end.
     let (one_thread, two_threads) = (pool(1), pool(2));
-    let seconds = |p: &rayon::ThreadPool, seed: u64| {
-        let start = Instant::now();
-        p.install(|| run_pmmh(2, seed));
-        start.elapsed().as_secs_f64()
-    };
-    let pairs: Vec<(f64, f64)> = (0..reps as u64)
-        .map(|r| (seconds(&one_thread, 9 + r), seconds(&two_threads, 9 + r)))
-        .collect();
-    let serial = median(pairs.iter().map(|p| p.0).collect());
-    let parallel = median(pairs.iter().map(|p| p.1).collect());
-    let mut ratios: Vec<f64> = pairs.iter().map(|(s, p)| s / p).collect();
-    let (_, lowest, highest) = crate::summary(&mut ratios);
-    emit(
-        &json!({"task": "pmmh_chains_throughput", "params": {"system": "nlbench", "chains": 2, "iterations": iterations, "M": 100, "reps": reps},
-        "seconds_1_thread": serial, "seconds_2_threads": parallel, "speedup": serial / parallel,
-        "speedup_range": [lowest, highest]}),
-    );
+    let mut speedup_2_chains = f64::NAN;
+    for (chains, iterations) in [(2usize, 300usize), (8, 100)] {
+        let timed = |p: &rayon::ThreadPool, seed: u64| {
+            let clock = ChainClock::new(chains, iterations);
+            let start = Instant::now();
+            p.install(|| run_pmmh(chains, iterations, seed, &clock));
+            (start.elapsed().as_secs_f64(), clock.total_seconds())
+        };
+        let pairs: Vec<((f64, f64), (f64, f64))> = (0..reps as u64)
+            .map(|r| (timed(&one_thread, 9 + r), timed(&two_threads, 9 + r)))
+            .collect();
+        let serial = median(pairs.iter().map(|p| p.0.0).collect());
+        let parallel = median(pairs.iter().map(|p| p.1.0).collect());
+        let mut ratios: Vec<f64> = pairs.iter().map(|(s, p)| s.0 / p.0).collect();
+        let (_, lowest, highest) = crate::summary(&mut ratios);
+        let contention = median(pairs.iter().map(|(s, p)| p.1 / s.1).collect());
+        let waiting = median(pairs.iter().map(|(_, p)| p.0 / (p.1 / 2.0)).collect());
+        if chains == 2 {
+            speedup_2_chains = serial / parallel;
+        }
+        emit(
+            &json!({"task": "pmmh_chains_throughput", "params": {"system": "nlbench", "chains": chains, "iterations": iterations, "M": 100, "reps": reps},
+            "seconds_1_thread": serial, "seconds_2_threads": parallel, "speedup": serial / parallel,
+            "speedup_range": [lowest, highest],
+            "chain_time_2_threads_over_1": contention,
+            "wall_over_half_chain_time": waiting}),
+        );
+    }
 
     posterior_check();
     emit(&json!({"task": "pmcmc_summary", "params": {"reps": reps},
         "pmmh_ms_per_iteration": pmmh_ms, "pmmh_target_ms": 2.0,
-        "chains_speedup_2_threads": serial / parallel}));
+        "chains_speedup_2_threads": speedup_2_chains}));
+}
+
+/// Records when each chain finished its first and its last iteration.
+struct ChainClock {
+    last: usize,
+    marks: Mutex<Vec<(Option<Instant>, Option<Instant>)>>,
+}
+
+impl ChainClock {
+    fn new(chains: usize, iterations: usize) -> Self {
+        ChainClock {
+            last: iterations - 1,
+            marks: Mutex::new(vec![(None, None); chains]),
+        }
+    }
+
+    /// The chains' durations (first to last iteration) added up, in seconds.
+    fn total_seconds(&self) -> f64 {
+        let marks = self.marks.lock().expect("not poisoned");
+        marks
+            .iter()
+            .map(|m| match m {
+                (Some(a), Some(b)) => (*b - *a).as_secs_f64(),
+                _ => 0.0,
+            })
+            .sum()
+    }
+}
+
+impl ChainObserver for ChainClock {
+    fn iteration(&self, chain: usize, iteration: usize) {
+        if iteration == 0 || iteration == self.last {
+            let now = Instant::now();
+            let mut marks = self.marks.lock().expect("not poisoned");
+            if iteration == 0 {
+                marks[chain].0 = Some(now);
+            } else {
+                marks[chain].1 = Some(now);
+            }
+        }
+    }
 }
 
 /// PMMH and PGAS against an exact-likelihood random-walk Metropolis chain on lgss.

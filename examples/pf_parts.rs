@@ -7,7 +7,9 @@ use std::time::Instant;
 use sysid::models::Nlbench;
 use sysid::smc::resample::systematic;
 use sysid::smc::weights::effective_sample_size;
-use sysid::smc::{ObservationDensity, TransitionSampler, normalise_log_weights, stream};
+use sysid::smc::{
+    ObservationDensity, TransitionSampler, fill_standard_normals, normalise_log_weights, stream,
+};
 
 fn ns_per(m: usize, reps: usize, mut f: impl FnMut()) -> f64 {
     let mut best = f64::INFINITY;
@@ -38,6 +40,12 @@ fn main() {
         "normal draw: {:.2} ns",
         ns_per(m, reps, || for x in next.iter_mut() {
             *x = StandardNormal.sample(&mut rng);
+        })
+    );
+    println!(
+        "normal draws in bulk (1024 per call): {:.2} ns",
+        ns_per(m, reps, || for block in next.chunks_mut(1024) {
+            fill_standard_normals(&mut rng, block);
         })
     );
     println!(

@@ -29,7 +29,7 @@ fn fit_nlbench_equals_the_library_and_reaches_the_truth() {
         "--iters",
         "40",
         "--particles",
-        "40",
+        "100",
         "--init",
         "0.6,20,9,0.04",
         "--seed",
@@ -54,7 +54,10 @@ fn fit_nlbench_equals_the_library_and_reaches_the_truth() {
         pi_y: Covariance::Fixed,
         ..AffineEmSpec::default()
     };
-    let mut em = AffineEm::new(&NlbenchAffine, series, 40, Tanizaki::default(), spec, 7).unwrap();
+    // M = 100: at M = 40 the E-step's Monte Carlo bias pulls d 10-25 % low within 40
+    // iterations on this record (seeds 7-10; docs/particle-em.md), at M = 100 seeds
+    // 7-10 all end within 8 % of the truth.
+    let mut em = AffineEm::new(&NlbenchAffine, series, 100, Tanizaki::default(), spec, 7).unwrap();
     let start = NlbenchParams {
         a: 0.6,
         b: 20.0,

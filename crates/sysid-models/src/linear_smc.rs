@@ -8,7 +8,7 @@ use sysid_kalman::LinearGaussianModel;
 use sysid_linalg::{LinalgError, cholesky_upper};
 use sysid_smc::{
     GuidedProposal, InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel,
-    StateSpace, TransitionBound, TransitionDensity, TransitionSampler,
+    StateSpace, TransitionBound, TransitionDensity, TransitionSampler, fill_standard_normals,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -382,7 +382,41 @@ impl TransitionSampler for LinearGaussianSmc {
         self.transition_mean(x, u, next);
         Self::add_product(&self.q_lower, self.n, &z[..self.n], next);
     }
+
+    /// `next_k = A x_{parents[k]} + B u + L z_k` with the `z` drawn in bulk
+    /// ([`fill_standard_normals`], one call per block of particles).
+    fn sample_transitions<R: Rng + ?Sized>(
+        &self,
+        _t: usize,
+        u: &[f64],
+        from: &[f64],
+        parents: &[usize],
+        next: &mut [f64],
+        rng: &mut R,
+    ) {
+        let n = self.n;
+        let mut z = [0.0; NORMALS_PER_BLOCK];
+        let per_block = NORMALS_PER_BLOCK / n;
+        for (block, parents) in next
+            .chunks_mut(per_block * n)
+            .zip(parents.chunks(per_block))
+        {
+            let z = &mut z[..block.len()];
+            fill_standard_normals(rng, z);
+            for ((x, &p), z) in block
+                .chunks_exact_mut(n)
+                .zip(parents)
+                .zip(z.chunks_exact(n))
+            {
+                self.transition_mean(&from[p * n..(p + 1) * n], u, x);
+                Self::add_product(&self.q_lower, n, z, x);
+            }
+        }
+    }
 }
+
+/// The normals drawn per call in [`LinearGaussianSmc::sample_transitions`].
+const NORMALS_PER_BLOCK: usize = 512;
 
 impl ObservationDensity for LinearGaussianSmc {
     fn log_observation(&self, _t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {

@@ -4,7 +4,7 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_smc::{
     InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel, StateSpace,
-    TransitionBound, TransitionDensity, TransitionSampler, stream,
+    TransitionBound, TransitionDensity, TransitionSampler, add_scaled_normals, stream,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -255,10 +255,7 @@ impl TransitionSampler for Nlbench {
         for (x, &p) in next.iter_mut().zip(parents) {
             *x = self.mean(from[p], forcing);
         }
-        for x in next.iter_mut() {
-            let z: f64 = StandardNormal.sample(rng);
-            *x += self.sd_q * z;
-        }
+        add_scaled_normals(rng, self.sd_q, next);
     }
 }
 

@@ -28,6 +28,7 @@ mod error;
 pub mod filter;
 mod history;
 mod model;
+pub mod normals;
 pub mod resample;
 mod series;
 mod simd;
@@ -44,6 +45,7 @@ pub use model::{
     FilterModel, GuidedProposal, InitialDensity, InitialSampler, ObservationDensity,
     ScalarGaussianKernel, StateSpace, TransitionBound, TransitionDensity, TransitionSampler,
 };
+pub use normals::{add_scaled_normals, fill_standard_normals};
 pub use resample::Resampling;
 pub use series::Series;
 pub use smoother::{

@@ -41,12 +41,12 @@
 //! Blackman and Vigna (2021), "Scrambled linear pseudorandom number generators".
 
 use crate::simd::{Kernel, dispatch};
+use crate::streams::{GOLDEN_GAMMA, splitmix_finaliser};
 
 const LANES: usize = 8;
 /// Draws per round: a cosine and a sine draw per lane.
-pub const ROUND: usize = 2 * LANES;
+const ROUND: usize = 2 * LANES;
 
-const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
 const TWO_POW_52: f64 = 4_503_599_627_370_496.0;
 /// The bits of `2^52`.
 const MAGIC_BITS: u64 = 0x4330_0000_0000_0000;
@@ -96,13 +96,6 @@ const COS: [f64; 9] = [
     -0.5,
     1.0,
 ];
-
-#[inline(always)]
-fn splitmix_finaliser(x: u64) -> u64 {
-    let z = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    let z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 /// Eight xoshiro256++ generators, stored word by word so that a step is vector code.
 struct Lanes {
@@ -181,7 +174,7 @@ fn minus_two_log(a: u64) -> f64 {
 
 /// `(cos 2 pi v, sin 2 pi v)` for `v = (b >> 12) 2^-52` in [0, 1).
 #[inline(always)]
-fn cos_sin_turn(b: u64) -> (f64, u64, f64) {
+fn cos_sin_turn(b: u64) -> (f64, f64) {
     let (f, top) = unit_interval_above_one(b);
     let v = f - 1.0;
     // q = round(4 v) in 0..=4, from the integer: (top + 2^49) >> 50.
@@ -197,7 +190,7 @@ fn cos_sin_turn(b: u64) -> (f64, u64, f64) {
     for &c in &COS[1..] {
         cp = cp.mul_add(x2, c);
     }
-    (cp, q, x * sp)
+    rotate(cp, q, x * sp)
 }
 
 /// Rotates `(cos x, sin x)` by `q` quarter turns: `(cos, sin) -> (-sin, cos)` per turn.
@@ -223,8 +216,7 @@ fn round(lanes: &mut Lanes) -> [f64; ROUND] {
     let (cos_half, sin_half) = out.split_at_mut(LANES);
     for j in 0..LANES {
         let radius = minus_two_log(a[j]).sqrt();
-        let (c, q, s) = cos_sin_turn(b[j]);
-        let (c, s) = rotate(c, q, s);
+        let (c, s) = cos_sin_turn(b[j]);
         cos_half[j] = radius * c;
         sin_half[j] = radius * s;
     }
@@ -277,13 +269,17 @@ impl Kernel for NormalKernel<'_> {
     }
 }
 
-fn seed_words<R: rand::Rng + ?Sized>(rng: &mut R) -> [u64; 4] {
-    [
-        rng.next_u64(),
-        rng.next_u64(),
-        rng.next_u64(),
-        rng.next_u64(),
-    ]
+impl<'a> NormalKernel<'a> {
+    /// The kernel seeded from four outputs of `rng`.
+    fn seeded<R: rand::Rng + ?Sized>(rng: &mut R, out: &'a mut [f64], scale: Option<f64>) -> Self {
+        let words = [
+            rng.next_u64(),
+            rng.next_u64(),
+            rng.next_u64(),
+            rng.next_u64(),
+        ];
+        NormalKernel { words, out, scale }
+    }
 }
 
 /// Fills `out` with independent `N(0, 1)` draws, taking four outputs of `rng`.
@@ -297,36 +293,14 @@ fn seed_words<R: rand::Rng + ?Sized>(rng: &mut R) -> [u64; 4] {
 /// assert!(mean.abs() < 0.04);
 /// ```
 pub fn fill_standard_normals<R: rand::Rng + ?Sized>(rng: &mut R, out: &mut [f64]) {
-    let words = seed_words(rng);
-    dispatch(NormalKernel {
-        words,
-        out,
-        scale: None,
-    });
+    dispatch(NormalKernel::seeded(rng, out, None));
 }
 
 /// Adds `scale` times independent `N(0, 1)` draws to every entry of `out` (the draws
 /// of [`fill_standard_normals`] for the same generator state), taking four outputs of
 /// `rng`.
 pub fn add_scaled_normals<R: rand::Rng + ?Sized>(rng: &mut R, scale: f64, out: &mut [f64]) {
-    let words = seed_words(rng);
-    dispatch(NormalKernel {
-        words,
-        out,
-        scale: Some(scale),
-    });
-}
-
-/// The baseline-target version, for tests that compare the dispatched kernels with it.
-#[doc(hidden)]
-pub fn fill_standard_normals_portable<R: rand::Rng + ?Sized>(rng: &mut R, out: &mut [f64]) {
-    let words = seed_words(rng);
-    NormalKernel {
-        words,
-        out,
-        scale: None,
-    }
-    .run();
+    dispatch(NormalKernel::seeded(rng, out, Some(scale)));
 }
 
 #[cfg(test)]
@@ -358,8 +332,7 @@ mod tests {
             let got = minus_two_log(a);
             worst_log = worst_log.max((got - exact).abs() / exact.max(1e-300));
             let v = (b >> 12) as f64 / TWO_POW_52;
-            let (c, q, s) = cos_sin_turn(b);
-            let (c, s) = rotate(c, q, s);
+            let (c, s) = cos_sin_turn(b);
             let angle = TWO_PI * v;
             worst_trig = worst_trig.max((c - angle.cos()).abs().max((s - angle.sin()).abs()));
         }
@@ -369,7 +342,7 @@ mod tests {
             "cos/sin: worst absolute error {worst_trig:e}"
         );
         assert_eq!(minus_two_log(0), 0.0);
-        assert_eq!(cos_sin_turn(0), (1.0, 0, 0.0));
+        assert_eq!(cos_sin_turn(0), (1.0, 0.0));
     }
 
     #[test]
@@ -377,7 +350,8 @@ mod tests {
         for len in [0, 1, 15, 16, 17, 1000, 1024] {
             let (mut a, mut b) = (vec![0.0; len], vec![0.0; len]);
             fill_standard_normals(&mut stream(5, 1), &mut a);
-            fill_standard_normals_portable(&mut stream(5, 1), &mut b);
+            // the kernel as compiled for the baseline target, without dispatch
+            NormalKernel::seeded(&mut stream(5, 1), &mut b, None).run();
             assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
         }
     }

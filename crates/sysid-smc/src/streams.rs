@@ -10,12 +10,20 @@ use rand::rngs::Xoshiro256PlusPlus;
 /// The generator used throughout sysid.
 pub type Rng = Xoshiro256PlusPlus;
 
-fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+/// SplitMix64's increment (the golden-ratio gamma).
+pub(crate) const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// SplitMix64's output function: a bijection of `u64` that mixes every bit.
+#[inline(always)]
+pub(crate) fn splitmix_finaliser(x: u64) -> u64 {
+    let z = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    let z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
+}
+
+fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(GOLDEN_GAMMA);
+    splitmix_finaliser(*state)
 }
 
 /// The generator of piece `stream` of the work seeded by `seed`.

@@ -96,8 +96,11 @@ const PINNED_NLBENCH: [u64; 4] = [
     // FFBSi-reject), Tanizaki's trial cap M/4 and FFBSi-reject's alias-table proposal
     // take the random numbers in another order; (2) the transition draws come from the
     // bulk normal generator (`sysid_smc::normals`: eight xoshiro lanes, Box-Muller)
-    // instead of one ziggurat draw per particle
+    // instead of one ziggurat draw per particle; the smoothers re-pinned 2026-11-23 on
+    // purpose a third time: the rejection trials take their uniforms and exponentials
+    // in bulk, a run per round (`trial_numbers`), and FFBSi-reject's alias table is
+    // built by the sweep (another table for the same weights)
     0xc04a3f96f4c3d947,
-    0x3fe8fbe897ee7f3f,
-    0x3fef3bf903496d46,
+    0x3fe943ba0f60d29d,
+    0x3feea5d8521e5f54,
 ];

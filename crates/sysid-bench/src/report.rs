@@ -118,14 +118,14 @@ const FLOORS: &[Floor] = &[
         select: &[("M", "50")],
         field: "ms_median",
         floor: 1.0,
-        why: "5e4 draws x ~20 ns: 3 rejection trials of two serial xoshiro outputs (~2 ns each), the nearest-mean pass, 7.6 % fallbacks of 50 vectorised exps",
+        why: "5e4 draws x ~20 ns: 3 rejection trials (a bulk uniform-exponential pair each), the nearest-mean pass, 7.6 % fallbacks of 50 vectorised exps",
     },
     Floor {
         task: "ffbsi_reject",
         select: &[("M", "1000")],
         field: "ms_median",
         floor: 6.0,
-        why: "1e6 trials x two serial xoshiro outputs (~2 ns each), plus 1000 alias tables (a sequential pairing pass, ~2 ns per particle)",
+        why: "1.2e6 trials x ~3 ns (a bulk uniform-exponential pair, an alias lookup, one density), plus 1000 alias tables (a split pass with two running sums at the add latency, ~1.5 us each)",
     },
     Floor {
         task: "ffbsi",

@@ -27,6 +27,7 @@ pub mod conditional;
 mod error;
 pub mod filter;
 mod history;
+mod lanes;
 mod model;
 pub mod normals;
 pub mod resample;
@@ -34,6 +35,7 @@ mod series;
 mod simd;
 pub mod smoother;
 mod streams;
+mod trial_numbers;
 mod vexp;
 pub mod weights;
 

@@ -28,6 +28,63 @@ pub(crate) trait BackwardStep {
     fn stats(&self) -> SmootherStats;
 }
 
+/// A backward step whose body is compiled for the widest vector instruction set: its
+/// [`BackwardStep::step`] runs [`step_body`](Self::step_body) through
+/// [`crate::simd::dispatch`] (so the model's kernels inlined into it are vectorised
+/// too).
+pub(crate) trait DispatchedStep {
+    fn step_body(
+        &mut self,
+        t: usize,
+        next_states: &[f64],
+        out: &mut [usize],
+        rng: &mut Rng,
+    ) -> Result<(), SmcError>;
+
+    fn step_stats(&self) -> SmootherStats;
+}
+
+impl<S: DispatchedStep> BackwardStep for S {
+    fn step(
+        &mut self,
+        t: usize,
+        next_states: &[f64],
+        _next_indices: &[usize],
+        out: &mut [usize],
+        rng: &mut Rng,
+    ) -> Result<(), SmcError> {
+        crate::simd::dispatch(StepKernel {
+            step: self,
+            t,
+            next_states,
+            out,
+            rng,
+        })
+    }
+
+    fn stats(&self) -> SmootherStats {
+        self.step_stats()
+    }
+}
+
+struct StepKernel<'s, 'd, S> {
+    step: &'s mut S,
+    t: usize,
+    next_states: &'d [f64],
+    out: &'d mut [usize],
+    rng: &'d mut Rng,
+}
+
+impl<S: DispatchedStep> crate::simd::Kernel for StepKernel<'_, '_, S> {
+    type Output = Result<(), SmcError>;
+
+    #[inline(always)]
+    fn run(self) -> Self::Output {
+        self.step
+            .step_body(self.t, self.next_states, self.out, self.rng)
+    }
+}
+
 /// Maps a failed categorical draw to the smoother error at `t`, path `path`.
 pub(crate) fn backward_error(failure: DrawFailure, t: usize, path: usize) -> SmcError {
     match failure {

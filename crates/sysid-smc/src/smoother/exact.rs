@@ -3,11 +3,10 @@
 use rand::RngExt;
 
 use super::SmootherStats;
-use super::backward::{BackwardStep, PATH_BLOCK, backward_error, gather};
+use super::backward::{DispatchedStep, PATH_BLOCK, backward_error, gather};
 use super::nearest;
 use super::rounds::{draw_in_rounds, uniform_index};
 use crate::model::{ScalarGaussianKernel, TransitionDensity};
-use crate::simd::Kernel;
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{DrawFailure, checked_row_max, draw_from_weights, shift_rows_by_max};
@@ -69,50 +68,13 @@ impl<'a, M: TransitionDensity> ExactStep<'a, M> {
     }
 }
 
-impl<M: TransitionDensity> BackwardStep for ExactStep<'_, M> {
-    fn step(
-        &mut self,
-        t: usize,
-        next_states: &[f64],
-        _next_indices: &[usize],
-        out: &mut [usize],
-        rng: &mut Rng,
-    ) -> Result<(), SmcError> {
-        crate::simd::dispatch(StepKernel {
-            step: self,
-            t,
-            next_states,
-            out,
-            rng,
-        })
-    }
-
-    fn stats(&self) -> SmootherStats {
+impl<M: TransitionDensity> DispatchedStep for ExactStep<'_, M> {
+    fn step_stats(&self) -> SmootherStats {
         self.stats
     }
-}
-
-struct StepKernel<'s, 'a, 'd, M> {
-    step: &'s mut ExactStep<'a, M>,
-    t: usize,
-    next_states: &'d [f64],
-    out: &'d mut [usize],
-    rng: &'d mut Rng,
-}
-
-impl<M: TransitionDensity> Kernel for StepKernel<'_, '_, '_, M> {
-    type Output = Result<(), SmcError>;
 
     #[inline(always)]
-    fn run(self) -> Self::Output {
-        self.step
-            .step_kernel(self.t, self.next_states, self.out, self.rng)
-    }
-}
-
-impl<M: TransitionDensity> ExactStep<'_, M> {
-    #[inline(always)]
-    fn step_kernel(
+    fn step_body(
         &mut self,
         t: usize,
         next_states: &[f64],

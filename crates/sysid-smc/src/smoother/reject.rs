@@ -16,7 +16,7 @@ use rand::RngExt;
 
 use super::SmootherStats;
 use super::alias::AliasTable;
-use super::backward::{BackwardStep, backward_error};
+use super::backward::{DispatchedStep, backward_error};
 use super::rounds::draw_in_rounds;
 use crate::model::{ScalarGaussianKernel, TransitionBound};
 use crate::streams::Rng;
@@ -90,12 +90,16 @@ impl ProposalTable {
     }
 }
 
-impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
-    fn step(
+impl<M: TransitionBound> DispatchedStep for RejectStep<'_, M> {
+    fn step_stats(&self) -> SmootherStats {
+        self.stats
+    }
+
+    #[inline(always)]
+    fn step_body(
         &mut self,
         t: usize,
         next_states: &[f64],
-        _next_indices: &[usize],
         out: &mut [usize],
         rng: &mut Rng,
     ) -> Result<(), SmcError> {
@@ -114,31 +118,41 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
                 None
             };
         }
-        let kernel = self.kernel;
         let (means, proposal) = (&self.means, &self.proposal);
-        let log_density = |k: usize, i: usize| match kernel {
-            Some(kernel) => kernel.log_density(means[i], next_states[k]),
-            None => log_f(
-                &states[i * n..(i + 1) * n],
-                &next_states[k * n..(k + 1) * n],
+        // a log-density above the bound, if any (the model's bound is wrong): the last
+        // one seen, a select per trial; the largest (`max`, with its NaN handling) would
+        // put a dependency chain of several cycles through the trial loop
+        let mut violation = f64::NEG_INFINITY;
+        let mut ratio = |value: f64| {
+            if value > log_bound {
+                violation = value;
+            }
+            // accepted with probability exp(value - log_bound)
+            value - log_bound
+        };
+        // one copy of the trial loop per kind of density, so that the density is
+        // inlined into it
+        let open = match self.kernel {
+            Some(kernel) => draw_in_rounds(
+                self.max_trials,
+                rng,
+                |u| proposal.draw(u),
+                |k, i| ratio(kernel.log_density(means[i], next_states[k])),
+                out,
+            ),
+            None => draw_in_rounds(
+                self.max_trials,
+                rng,
+                |u| proposal.draw(u),
+                |k, i| {
+                    ratio(log_f(
+                        &states[i * n..(i + 1) * n],
+                        &next_states[k * n..(k + 1) * n],
+                    ))
+                },
+                out,
             ),
         };
-        // the largest log-density above the bound, if any (the model's bound is wrong)
-        let mut violation = f64::NEG_INFINITY;
-        let open = draw_in_rounds(
-            self.max_trials,
-            rng,
-            |u| proposal.draw(u),
-            |k, i| {
-                let value = log_density(k, i);
-                if value > log_bound {
-                    violation = violation.max(value);
-                }
-                // accepted with probability exp(value - log_bound)
-                value - log_bound
-            },
-            out,
-        );
         self.stats.trials += open.trials;
         self.stats.density_evaluations += open.trials;
         if violation > log_bound {
@@ -162,9 +176,5 @@ impl<M: TransitionBound> BackwardStep for RejectStep<'_, M> {
                 .map_err(|f| backward_error(f, t, k))?;
         }
         Ok(())
-    }
-
-    fn stats(&self) -> SmootherStats {
-        self.stats
     }
 }

@@ -11,17 +11,17 @@
 //! trials use fresh random numbers whatever the other rows do, and the exact draw after
 //! a run of rejections has the target distribution too.
 //!
-//! The random numbers are taken round after round (the open rows in row order), so the
-//! draws depend only on the block's stream.
+//! The trials' numbers (a uniform for the proposal, an exponential for the test) come
+//! in bulk from [`TrialNumbers`], one run of pairs per round (the open rows in row
+//! order), so the draws depend only on the block's stream.
 //!
 //! # Complexity
-//! One proposal, one `log_ratio` and two random numbers per trial, branch-free.
-
-use rand::RngExt;
-use rand_distr::{Distribution, Exp1};
+//! One proposal, one `log_ratio` and one bulk pair of random numbers per trial,
+//! branch-free.
 
 use super::backward::PATH_BLOCK;
 use crate::streams::Rng;
+use crate::trial_numbers::TrialNumbers;
 
 /// What [`draw_in_rounds`] leaves open: the rows that rejected every trial.
 pub(crate) struct OpenRows {
@@ -61,21 +61,33 @@ pub(crate) fn draw_in_rounds(
     for (k, slot) in open.rows[..rows].iter_mut().enumerate() {
         *slot = k as u8;
     }
+    let mut numbers = TrialNumbers::new();
+    let mut candidates = [0usize; PATH_BLOCK];
+    let mut accepted = [false; PATH_BLOCK];
     for _ in 0..trials {
         let len = open.len;
         if len == 0 {
             break;
         }
         open.trials += len as u64;
+        // Three passes over the open rows: the proposals, the tests, then the
+        // compaction of the rows still open. The first two have no loop-carried
+        // dependency (the compiler may use vector gathers), and no trial's whole chain
+        // (proposal, density, test) sits on the count of open rows.
+        let (uniforms, exponentials) = numbers.take(rng, len);
+        for (candidate, &u) in candidates[..len].iter_mut().zip(uniforms) {
+            *candidate = propose(u);
+        }
+        for j in 0..len {
+            let k = usize::from(open.rows[j]);
+            accepted[j] = log_ratio(k, candidates[j]) > -exponentials[j];
+        }
         let mut still_open = 0;
         for j in 0..len {
             let k = usize::from(open.rows[j]);
-            let i = propose(rng.random::<f64>());
-            let e: f64 = Exp1.sample(rng);
-            let accepted = log_ratio(k, i) > -e;
-            chosen[k] = i;
+            chosen[k] = candidates[j];
             open.rows[still_open] = k as u8;
-            still_open += usize::from(!accepted);
+            still_open += usize::from(!accepted[j]);
         }
         open.len = still_open;
     }
@@ -110,17 +122,19 @@ mod tests {
             &mut drawn,
         );
         let mut rng = stream(5, 1);
+        let mut numbers = TrialNumbers::new();
         let mut open: Vec<usize> = (0..rows).collect();
         let mut chosen = vec![usize::MAX; rows];
         let mut trials = 0;
         for _ in 0..3 {
             let mut next = Vec::new();
-            for &k in &open {
+            let (uniforms, exponentials) = numbers.take(&mut rng, open.len());
+            let (uniforms, exponentials) = (uniforms.to_vec(), exponentials.to_vec());
+            for (j, &k) in open.iter().enumerate() {
                 trials += 1;
-                let i = uniform_index(rng.random::<f64>(), m);
-                let e: f64 = Exp1.sample(&mut rng);
+                let i = uniform_index(uniforms[j], m);
                 chosen[k] = i;
-                if log_ratio(k, i) <= -e {
+                if log_ratio(k, i) <= -exponentials[j] {
                     next.push(k);
                 }
             }

@@ -7,15 +7,19 @@
 //! vector lanes, about a tenth of that.
 //!
 //! # Algorithm
-//! 1. **Seeding.** One call takes four 64-bit outputs of the caller's generator,
-//!    whatever the number of draws, and seeds eight xoshiro256++ lanes
-//!    ([`crate::lanes`]).
+//! 1. **Seeding.** One call takes four 64-bit outputs `w_0..w_3` of the caller's
+//!    generator, whatever the number of draws, and seeds eight xoshiro256++ lanes:
+//!    word `i` of lane `j` is the SplitMix64 finaliser (a bijection) of
+//!    `w_i + (j + 1) * 0x9E3779B97F4A7C15`, so the lanes are distinct, well-mixed
+//!    generators (the lane code is shared with the rejection trials' numbers).
 //! 2. **Uniforms.** Each round every lane gives two outputs `a, b`, whose top 52 bits
 //!    make `u = 1 - (a >> 12) 2^-52` in (0, 1] and `v = (b >> 12) 2^-52` in [0, 1).
 //! 3. **Box–Muller.** `sqrt(-2 ln u) (cos 2 pi v, sin 2 pi v)` are two independent
 //!    `N(0, 1)` draws. The largest possible value is `sqrt(2 * 52 ln 2) = 8.49`
 //!    (a tail of probability 2e-17 is cut).
-//!    * `ln u`: the lanes' polynomial logarithm ([`crate::lanes`]).
+//!    * `ln u`: `u = 2^k m` with `m` in [sqrt(1/2), sqrt(2)), `s = (m - 1) / (m + 1)`,
+//!      `ln m = 2 atanh(s) = 2 s (1 + s^2/3 + ... + s^18/19)` (`|s| <= 0.1716`,
+//!      truncation below 1e-17 relative), `ln u = k ln 2 + ln m`.
 //!    * `cos, sin (2 pi v)`: `q = round(4 v)`, `theta = 2 pi (v - q/4)` in
 //!      [-pi/4, pi/4] (the subtraction is exact), Taylor polynomials to `theta^15`
 //!      and `theta^16` (truncation below 1e-16), then the rotation by `q` quarter

@@ -39,7 +39,7 @@ pub(crate) struct TrialNumbers {
 }
 
 impl TrialNumbers {
-    /// An empty buffer: the first pair refills it.
+    /// An empty buffer: the first run taken refills it.
     pub fn new() -> Self {
         TrialNumbers {
             uniforms: [0.0; CHUNK],

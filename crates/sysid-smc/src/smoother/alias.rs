@@ -74,23 +74,16 @@ impl AliasTable {
         self.deficit_before.resize(m + 2, 0.0);
         self.heavy.resize(m + 1, 0);
         self.excess_through.resize(m + 1, 0.0);
-        let light = LightCells {
+        let mut light = LightCells {
             cells: &mut self.light,
             deficit_before: &mut self.deficit_before,
         };
-        let heavy = HeavyCells {
+        let mut heavy = HeavyCells {
             cells: &mut self.heavy,
             excess_through: &mut self.excess_through,
         };
-        let (lights, heavies) = split_and_sum(
-            weights,
-            scale,
-            &mut self.prob,
-            light.cells,
-            light.deficit_before,
-            heavy.cells,
-            heavy.excess_through,
-        );
+        let (lights, heavies) =
+            split_and_sum(weights, scale, &mut self.prob, &mut light, &mut heavy);
         merge(
             &mut self.prob,
             &mut self.alias,
@@ -136,11 +129,11 @@ fn split_and_sum(
     weights: &[f64],
     scale: f64,
     prob: &mut [f64],
-    light: &mut [usize],
-    deficit_before: &mut [f64],
-    heavy: &mut [usize],
-    excess_through: &mut [f64],
+    light_cells: &mut LightCells<'_>,
+    heavy_cells: &mut HeavyCells<'_>,
 ) -> (usize, usize) {
+    let (light, deficit_before) = (&mut *light_cells.cells, &mut *light_cells.deficit_before);
+    let (heavy, excess_through) = (&mut *heavy_cells.cells, &mut *heavy_cells.excess_through);
     let (mut lights, mut heavies) = (0, 0);
     let (mut deficit, mut excess) = (0.0, 0.0);
     for (i, (&w, scaled)) in weights.iter().zip(prob.iter_mut()).enumerate() {
@@ -199,15 +192,17 @@ fn merge(
         e = std::hint::select_unpredictable(heavy_done, e_next, e);
     }
     // Heavy cells from `j` on never turned light (the current one was written
-    // speculatively): whole cells. Light cells are left over only when there is no
-    // heavy cell at all, every scaled weight 1 up to rounding: whole cells too.
+    // speculatively): whole cells. Without any heavy cell (every scaled weight 1 up to
+    // rounding) the merge did not run: the light cells are whole cells too.
     for &h in &heavy.cells[j..heavies] {
         prob[h] = 1.0;
         alias[h] = h;
     }
-    for &l in &light.cells[k.min(lights)..lights] {
-        prob[l] = 1.0;
-        alias[l] = l;
+    if heavies == 0 {
+        for &l in &light.cells[..lights] {
+            prob[l] = 1.0;
+            alias[l] = l;
+        }
     }
 }
 

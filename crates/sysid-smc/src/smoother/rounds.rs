@@ -72,8 +72,8 @@ pub(crate) fn draw_in_rounds(
         open.trials += len as u64;
         // Three passes over the open rows: the proposals, the tests, then the
         // compaction of the rows still open. The first two have no loop-carried
-        // dependency (the compiler may use vector gathers), and no trial's whole chain
-        // (proposal, density, test) sits on the count of open rows.
+        // dependency, and no trial's whole chain (proposal, density, test) sits on the
+        // count of open rows.
         let (uniforms, exponentials) = numbers.take(rng, len);
         for (candidate, &u) in candidates[..len].iter_mut().zip(uniforms) {
             *candidate = propose(u);
@@ -129,7 +129,6 @@ mod tests {
         for _ in 0..3 {
             let mut next = Vec::new();
             let (uniforms, exponentials) = numbers.take(&mut rng, open.len());
-            let (uniforms, exponentials) = (uniforms.to_vec(), exponentials.to_vec());
             for (j, &k) in open.iter().enumerate() {
                 trials += 1;
                 let i = uniform_index(uniforms[j], m);

@@ -167,9 +167,10 @@ fn split_and_sum(
 /// with `cmov`. (As doubles, on the baseline instruction set without SSE4.1 blends,
 /// each select became a branch that mispredicted at every coin-toss step; with the
 /// filter's weights that cost about 3.5 us per table at M = 1000, the rejection FFBSi
-/// benchmark's 21 ms against 17.5 ms now. Loading two steps ahead, so that no load sits on the chain, measured no
-/// faster than one with the extra selects. Two interleaved chains over the halves of
-/// the merge, each guarded against the other half's cells, were slower than one.)
+/// benchmark's 21 ms against 17.5 ms now. Loading two steps ahead, so that no load
+/// sits on the chain, measured no faster than one with the extra selects. Two
+/// interleaved chains over the halves of the merge, each guarded against the other
+/// half's cells, were slower than one.)
 fn merge(
     prob: &mut [f64],
     alias: &mut [usize],

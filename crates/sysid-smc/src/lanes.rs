@@ -21,6 +21,7 @@
 //! Blackman and Vigna (2021), "Scrambled linear pseudorandom number generators".
 
 use crate::streams::{GOLDEN_GAMMA, splitmix_finaliser};
+use crate::vexp::{LN2_HI, LN2_LO};
 
 /// Generators per [`Lanes`].
 pub(crate) const LANES: usize = 8;
@@ -28,10 +29,6 @@ pub(crate) const LANES: usize = 8;
 pub(crate) const TWO_POW_52: f64 = 4_503_599_627_370_496.0;
 /// The bits of `2^52`.
 const MAGIC_BITS: u64 = 0x4330_0000_0000_0000;
-/// `ln 2` rounded to 32 significant bits, so that `k * LN2_HI` is exact for `|k| < 2^20`.
-const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
-/// `ln 2 - LN2_HI`.
-const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
 const MANTISSA: u64 = (1 << 52) - 1;
 const ONE_BITS: u64 = 1023 << 52;
 /// The bits of sqrt(2) rounded down (a mantissa above it is halved).

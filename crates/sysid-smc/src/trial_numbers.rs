@@ -8,9 +8,10 @@
 //!
 //! # Algorithm
 //! [`TrialNumbers`] hands out runs of pairs from a buffer of [`CHUNK`] (a run that does
-//! not fit in what is left drops the rest). An empty buffer is refilled from eight xoshiro256++ lanes seeded by four outputs of the caller's
-//! generator ([`crate::lanes`]): round `r` takes two outputs `a, b` of each lane `j`,
-//! and pair `8 r + j` is
+//! not fit in what is left drops the rest). An empty buffer is refilled from eight
+//! xoshiro256++ lanes seeded by four outputs of the caller's generator
+//! ([`crate::lanes`]): round `r` takes two outputs `a, b` of each lane `j`, and pair
+//! `8 r + j` is
 //!
 //! ```text
 //! u = (b >> 12) 2^-52            in [0, 1)

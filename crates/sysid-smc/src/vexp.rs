@@ -18,10 +18,10 @@
 use crate::simd::{Kernel, dispatch};
 
 const LOG2_E: f64 = std::f64::consts::LOG2_E;
-/// `ln 2` rounded to 32 significant bits, so that `k * LN2_HI` is exact.
-const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+/// `ln 2` rounded to 32 significant bits, so that `k * LN2_HI` is exact for `|k| < 2^20`.
+pub(crate) const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
 /// `ln 2 - LN2_HI`.
-const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+pub(crate) const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
 /// 1.5 * 2^52: adding it rounds to an integer held in the low mantissa bits.
 const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
 const MIN_ARG: f64 = -708.0;

@@ -140,11 +140,13 @@ fn ten_thousand_iterations_on_lti2x2_stay_finite_monotone_and_positive_definite(
 /// A known limit, pinned so that a change is noticed: with T = 200 the full-R model's
 /// likelihood rises towards a boundary where R is singular (the 8-state model tracks
 /// the outputs through Q). Near iteration 5000, with R's smallest eigenvalue ~1e-14 of
-/// its largest, the computed M-step lowers the likelihood by ~1e-7 relative. The
-/// decrease is real (a 50-digit evaluation agrees:
+/// its largest, the computed M-step lowers the likelihood by ~1e-7 to 1e-6 relative
+/// (1.1e-6 at iteration 5351 since the E-step's kernels changed their rounding on
+/// 2026-11-23). The decrease is real (a 50-digit evaluation agrees:
 /// `crates/sysid-em/tests/reference/em_decrease_mpmath.py`), and it is rounding:
 /// perturbing the statistics by 1e-16 of their size moves the M-step's change of
-/// log-likelihood anywhere in [-1.9e-3, +0.9e-3] (`examples/em_decrease.rs`). The
+/// log-likelihood anywhere in [-1.9e-3, +0.9e-3] (`examples/em_decrease.rs`), i.e.
+/// up to ~5e-6 of the log-likelihood (~407), which bounds the pinned size below. The
 /// runner reports it as `LikelihoodDecreased` and returns the better iterate; it never
 /// continues silently. `min_variance` is the remedy (next test).
 #[test]
@@ -159,7 +161,12 @@ fn at_a_singular_r_boundary_the_decrease_is_reported_not_hidden() {
         panic!("expected the reported decrease, got {termination:?}");
     };
     assert!((5000..5600).contains(&iteration), "iteration {iteration}");
-    assert!(current < previous && (previous - current) / previous.abs() < 1e-6);
+    let relative = (previous - current) / previous.abs();
+    eprintln!("decrease at iteration {iteration}: {previous} -> {current}, relative {relative:e}");
+    assert!(
+        current < previous && relative < 1e-5,
+        "relative decrease {relative:e}"
+    );
     assert!(health.non_finite.is_empty());
     assert!(
         health.worst_r < 1e-10,

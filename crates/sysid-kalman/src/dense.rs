@@ -74,6 +74,7 @@ pub(crate) fn symmetrize(m: &mut [f64], n: usize) {
 /// `transpose_a`. Sizes up to 8 (the common state dimensions) run a kernel specialised
 /// at compile time, which unrolls fully and keeps a column in registers; larger sizes
 /// use the general routines.
+#[inline(always)]
 pub(crate) fn mul_square(
     c: &mut [f64],
     a: &[f64],
@@ -133,6 +134,47 @@ fn square_kernel<const N: usize>(
         }
         c[j * N..(j + 1) * N].copy_from_slice(&out);
     }
+}
+
+/// `out = a v` with `a` (r x k, column-major), `v` (k), `out` (r): columns of `a` whose
+/// entry of `v` is zero are skipped, so a sparse `v` costs only its non-zeros. Row
+/// counts up to 8 run a copy compiled for a constant `r` (the axpy loops unroll into
+/// registers); the arithmetic, and so the result, is the same.
+#[inline(always)]
+pub(crate) fn mul_vec_sparse(out: &mut [f64], a: &[f64], v: &[f64], r: usize) {
+    match r {
+        1 => mul_vec_sparse_body::<1>(out, a, v),
+        2 => mul_vec_sparse_body::<2>(out, a, v),
+        3 => mul_vec_sparse_body::<3>(out, a, v),
+        4 => mul_vec_sparse_body::<4>(out, a, v),
+        5 => mul_vec_sparse_body::<5>(out, a, v),
+        6 => mul_vec_sparse_body::<6>(out, a, v),
+        7 => mul_vec_sparse_body::<7>(out, a, v),
+        8 => mul_vec_sparse_body::<8>(out, a, v),
+        _ => {
+            let out = &mut out[..r];
+            out.fill(0.0);
+            for (k, &vk) in v.iter().enumerate() {
+                if vk != 0.0 {
+                    sysid_linalg::axpy(vk, &a[k * r..(k + 1) * r], out);
+                }
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn mul_vec_sparse_body<const R: usize>(out: &mut [f64], a: &[f64], v: &[f64]) {
+    let mut acc = [0.0_f64; R];
+    for (k, &vk) in v.iter().enumerate() {
+        if vk != 0.0 {
+            let col = &a[k * R..(k + 1) * R];
+            for i in 0..R {
+                acc[i] += vk * col[i];
+            }
+        }
+    }
+    out[..R].copy_from_slice(&acc);
 }
 
 /// Step `k` of a buffer that stores `n`-vectors one after another.

@@ -3,7 +3,8 @@
 use crate::{KalmanError, LinearGaussianModel, Record, Result, dense};
 use nalgebra::{DMatrix, DVectorView};
 use sysid_linalg::{
-    LN_2PI, LogProduct, QrScratch, axpy, dot, solve_upper, triangularize, triangularize_stacked,
+    LN_2PI, LogProduct, QrScratch, axpy, dot, solve_upper_rows, triangularize,
+    triangularize_stacked_leading,
 };
 
 /// What a filter pass keeps.
@@ -32,7 +33,8 @@ pub struct FilterOutput {
     pub(crate) filt_mean: Vec<f64>,
     /// `J_t'` (transposed smoother gain), T x n x n
     pub(crate) gain_t: Vec<f64>,
-    /// factor of `Cov(x_t | y_{1:t}, x_{t+1})`, T x n x n
+    /// a square factor `X33` (not triangular) with `X33'X33 = Cov(x_t | y_{1:t}, x_{t+1})`,
+    /// T x n x n
     pub(crate) cond_factor: Vec<f64>,
     /// whether step t reused the factor of step t-1 (steady state reached)
     pub(crate) reused: Vec<bool>,
@@ -97,7 +99,9 @@ impl FilterOutput {
 /// calls (and EM iterations): no allocation per time step.
 #[derive(Debug, Clone, Default)]
 pub struct KalmanWorkspace {
-    /// the factor being updated, `c x c` with leading dimension `ldr = p + 2n`
+    /// the factor being updated: its first `p + n` rows (the rows that the partial
+    /// triangularisation writes) by `c = p + 2n` columns, leading dimension
+    /// `ldr = p + n`
     rbuf: Vec<f64>,
     ldr: usize,
     /// the state rows `[U C_o', U A', U]`, `rank x c`, leading dimension `n`
@@ -123,6 +127,8 @@ pub struct KalmanWorkspace {
     ct: Vec<f64>,
     /// `D u_t + h`
     du_h: Vec<f64>,
+    /// `X23` by rows (`n x n`), the right-hand side of the gain solve
+    gain_rows: Vec<f64>,
     pub(crate) filter: FilterOutput,
     pub(crate) smoother: crate::SmootherOutput,
     pub(crate) scratch: Vec<f64>,
@@ -181,9 +187,9 @@ impl KalmanWorkspace {
 
     fn prepare(&mut self, model: &LinearGaussianModel, t_len: usize, keep: Keep) {
         let (n, p) = (model.n(), model.p());
-        self.ldr = p + 2 * n;
-        self.rbuf.resize(self.ldr * self.ldr, 0.0);
-        self.xbuf.resize(n * self.ldr, 0.0);
+        self.ldr = p + n;
+        self.rbuf.resize(self.ldr * (p + 2 * n), 0.0);
+        self.xbuf.resize(n * (p + 2 * n), 0.0);
         self.u_compact.resize(n * n, 0.0);
         self.noise_pattern = None;
         self.eps.resize(p, 0.0);
@@ -191,6 +197,7 @@ impl KalmanWorkspace {
         self.u_pred.resize(n * n, 0.0);
         self.x_next.resize(n, 0.0);
         self.du_h.resize(p, 0.0);
+        self.gain_rows.resize(n * n, 0.0);
         self.observed.reserve(p);
         self.at.clear();
         self.at.extend(model.a().transpose().iter());
@@ -236,7 +243,7 @@ impl KalmanWorkspace {
         triangularize(&mut self.noise_buf, ld, ell, k, &mut self.qr);
         let ldr = self.ldr;
         self.r_template.clear();
-        self.r_template.resize(ldr * ldr, 0.0);
+        self.r_template.resize(ldr * (model.p() + 2 * n), 0.0);
         for j in 0..k {
             self.r_template[j * ldr..j * ldr + k]
                 .copy_from_slice(&self.noise_buf[j * ld..j * ld + k]);
@@ -246,6 +253,7 @@ impl KalmanWorkspace {
 
     /// Records which rows of the `n x n` factor `u_pred` are non-zero, and copies them
     /// into `u_compact`.
+    #[inline(always)]
     fn compact_factor(&mut self, n: usize, triangular: bool) {
         self.u_rows.clear();
         for i in 0..n {
@@ -266,8 +274,27 @@ impl KalmanWorkspace {
         }
     }
 
-    /// The forward pass. `record_index` only labels errors.
+    /// The forward pass. `record_index` only labels errors. Runs compiled for the
+    /// widest vector instructions the CPU has ([`sysid_linalg::simd`]; same bits).
     pub(crate) fn run(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        record_index: usize,
+        keep: Keep,
+    ) -> Result<f64> {
+        sysid_linalg::simd::dispatch(ForwardPass {
+            workspace: self,
+            model,
+            record,
+            record_index,
+            keep,
+        })
+    }
+
+    /// [`run`](Self::run) as compiled into the caller (a dispatched kernel).
+    #[inline(always)]
+    pub(crate) fn run_body(
         &mut self,
         model: &LinearGaussianModel,
         record: &Record,
@@ -327,13 +354,7 @@ impl KalmanWorkspace {
                 let uc = &self.u_compact[..rank * n];
                 let xb = &mut self.xbuf;
                 let mut fill = |j: usize, v: &[f64]| {
-                    let col = &mut xb[j * ldx..j * ldx + rank];
-                    col.fill(0.0);
-                    for (k, &vk) in v.iter().enumerate() {
-                        if vk != 0.0 {
-                            axpy(vk, &uc[k * rank..(k + 1) * rank], col);
-                        }
-                    }
+                    dense::mul_vec_sparse(&mut xb[j * ldx..j * ldx + rank], uc, v, rank);
                 };
                 for (j, &oi) in self.observed.iter().enumerate() {
                     fill(j, &self.ct[oi * n..(oi + 1) * n]);
@@ -347,8 +368,13 @@ impl KalmanWorkspace {
                         xb[j * ldx..j * ldx + rank].copy_from_slice(&uc[k * rank..(k + 1) * rank]);
                     }
                 }
-                triangularize_stacked(pre, ld, xb, ldx, rank, cols);
-                self.u_used.copy_from_slice(&self.u_pred);
+                // The noise columns are eliminated; the last n (stored) columns keep
+                // [X13; X23] in R and leave Z (rank x n, Z'Z = X33'X33) in X: the
+                // smoother needs only the product, so Z is not triangularised.
+                triangularize_stacked_leading(pre, ld, xb, ldx, rank, k_noise, cols);
+                // u_pred is overwritten by X22 below (this branch's condition), so
+                // its old value moves to u_used instead of being copied.
+                std::mem::swap(&mut self.u_used, &mut self.u_pred);
                 self.prev_mask = self.observed_mask;
                 self.prev_observed.clone_from(&self.observed);
             }
@@ -384,14 +410,7 @@ impl KalmanWorkspace {
             }
             observed_sum += po;
             // ---- x_{t+1|t} = A x + B u + X12' eps ----
-            self.x_next.fill(0.0);
-            for k in 0..n {
-                axpy(
-                    self.x_pred[k],
-                    &a.as_slice()[k * n..(k + 1) * n],
-                    &mut self.x_next,
-                );
-            }
+            dense::mul_vec_sparse(&mut self.x_next, a.as_slice(), &self.x_pred, n);
             for (k, &uk) in u_t.iter().enumerate() {
                 axpy(uk, &b.as_slice()[k * n..(k + 1) * n], &mut self.x_next);
             }
@@ -411,15 +430,27 @@ impl KalmanWorkspace {
                     f.gain_t.copy_within((t - 1) * nn..t * nn, t * nn);
                     f.cond_factor.copy_within((t - 1) * nn..t * nn, t * nn);
                 } else {
-                    let gain = &mut f.gain_t[t * nn..(t + 1) * nn];
                     let cond = &mut f.cond_factor[t * nn..(t + 1) * nn];
+                    let rank = self.u_rows.len();
+                    // X23 by rows, solved in that layout (whole-row operations), then
+                    // stored by columns
+                    let rows = &mut self.gain_rows;
                     for j in 0..n {
-                        let src = (po + n + j) * ld;
-                        gain[j * n..(j + 1) * n].copy_from_slice(&pre[src + po..src + po + n]);
-                        cond[j * n..(j + 1) * n]
-                            .copy_from_slice(&pre[src + po + n..src + po + 2 * n]);
+                        let src = (po + n + j) * ld + po;
+                        for i in 0..n {
+                            rows[i * n + j] = pre[src + i];
+                        }
+                        let z = &self.xbuf[(k_noise + j) * n..(k_noise + j) * n + rank];
+                        cond[j * n..j * n + rank].copy_from_slice(z);
+                        cond[j * n + rank..(j + 1) * n].fill(0.0);
                     }
-                    solve_upper(&pre[po * ld + po..], ld, n, gain, n, n);
+                    solve_upper_rows(&pre[po * ld + po..], ld, n, rows, n);
+                    let gain = &mut f.gain_t[t * nn..(t + 1) * nn];
+                    for j in 0..n {
+                        for i in 0..n {
+                            gain[j * n + i] = rows[i * n + j];
+                        }
+                    }
                 }
             }
             // ---- U_{t+1|t} = X22 (unchanged when the factor was reused) ----
@@ -443,9 +474,29 @@ impl KalmanWorkspace {
     }
 }
 
+/// The forward pass as a [`Kernel`](sysid_linalg::simd::Kernel).
+struct ForwardPass<'w, 'm, 'r> {
+    workspace: &'w mut KalmanWorkspace,
+    model: &'m LinearGaussianModel,
+    record: &'r Record,
+    record_index: usize,
+    keep: Keep,
+}
+
+impl sysid_linalg::simd::Kernel for ForwardPass<'_, '_, '_> {
+    type Output = Result<f64>;
+
+    #[inline(always)]
+    fn run(self) -> Self::Output {
+        self.workspace
+            .run_body(self.model, self.record, self.record_index, self.keep)
+    }
+}
+
 /// Whether the square-root recursion has settled: `max |a - b| <= 16 n eps max |b|`,
 /// a change below what the recursion's own rounding can resolve (`n` is the state
 /// dimension). An exactly zero `b` requires an exactly zero `a`.
+#[inline(always)]
 pub(crate) fn settled(a: &[f64], b: &[f64], n: usize) -> bool {
     let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     let tol = 16.0 * n as f64 * f64::EPSILON * scale;

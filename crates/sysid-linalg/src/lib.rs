@@ -14,6 +14,9 @@
 //!   zero pivot row as "no information" (the generalised-inverse convention that
 //!   matches the factors `triangularize` produces for singular covariances).
 //!
+//! [`simd`] runs a hot kernel compiled for the widest vector instruction set the CPU
+//! has, with the same bits on every path.
+//!
 //! Matrices are column-major; the kernels work on slices with an explicit leading
 //! dimension so that callers can reuse one buffer for pre-arrays of varying shape.
 
@@ -24,6 +27,7 @@ mod gaussian;
 mod logdet;
 mod qr;
 mod qr_stacked;
+pub mod simd;
 mod symmetric;
 mod triangular;
 
@@ -33,6 +37,6 @@ pub use error::LinalgError;
 pub use gaussian::{LN_2PI, gaussian_logpdf_from_factor, logdet_from_factor};
 pub use logdet::LogProduct;
 pub use qr::{QrScratch, triangularize};
-pub use qr_stacked::triangularize_stacked;
+pub use qr_stacked::{triangularize_stacked, triangularize_stacked_leading};
 pub use symmetric::{check_finite, check_symmetric, symmetrize};
-pub use triangular::{solve_upper, solve_upper_transpose};
+pub use triangular::{solve_upper, solve_upper_rows, solve_upper_transpose};

@@ -44,28 +44,47 @@ pub fn triangularize_stacked(
     rows_x: usize,
     cols: usize,
 ) {
-    assert!(ldr >= cols && r.len() >= ldr * cols.saturating_sub(1) + cols);
-    assert!(rows_x == 0 || (ldx >= rows_x && x.len() >= ldx * (cols - 1) + rows_x));
-    // The common state dimensions get a copy compiled for a constant row count, so the
-    // short dot/axpy loops unroll; the arithmetic (and so the result) is the same.
-    match rows_x {
-        1 => stacked_body(r, ldr, x, ldx, 1, cols),
-        2 => stacked_body(r, ldr, x, ldx, 2, cols),
-        3 => stacked_body(r, ldr, x, ldx, 3, cols),
-        4 => stacked_body(r, ldr, x, ldx, 4, cols),
-        5 => stacked_body(r, ldr, x, ldx, 5, cols),
-        6 => stacked_body(r, ldr, x, ldx, 6, cols),
-        7 => stacked_body(r, ldr, x, ldx, 7, cols),
-        8 => stacked_body(r, ldr, x, ldx, 8, cols),
-        _ => stacked_body(r, ldr, x, ldx, rows_x, cols),
-    }
+    triangularize_stacked_leading(r, ldr, x, ldx, rows_x, cols, cols);
 }
 
+/// [`triangularize_stacked`] stopped after the first `pivots` columns, in place.
+///
+/// # Model
+/// `R` (`pivots x cols` used, upper triangular in its first `pivots` columns) stacked
+/// on `X` (`rows_x x cols`) as in [`triangularize_stacked`], with the rows of `R` from
+/// `pivots` on taken as zero (they are neither read nor written, so `ldr >= pivots`
+/// suffices). One reflector per column `j < pivots` gives
+/// ```text
+/// Q' [R; X] = [[R+_11, R+_12], [0, Z]],   R+ = [R+_11, R+_12] (pivots x cols)
+/// ```
+/// with `R+_11` upper triangular (non-negative diagonal) written over `R`, and the
+/// trailing `rows_x x (cols - pivots)` block `Z` written over the last columns of `X`.
+/// Then `R+'R+ + [0, Z]'[0, Z] = R'R + X'X`. When only `Z'Z` is needed from the trailing
+/// block (a covariance), stopping here saves its triangularisation: the reflectors of
+/// the last columns are the end of the sequential chain of the whole factorisation.
+///
+/// # Complexity
+/// `4 (1 + rows_x) (cols - j - 1)` flops for each column `j < pivots`, no allocation.
+///
+/// # Panics
+/// If `pivots > cols` or the buffers are shorter than their shapes require (a
+/// programming error).
 #[inline(always)]
-fn stacked_body(r: &mut [f64], ldr: usize, x: &mut [f64], ldx: usize, rows_x: usize, cols: usize) {
+pub fn triangularize_stacked_leading(
+    r: &mut [f64],
+    ldr: usize,
+    x: &mut [f64],
+    ldx: usize,
+    rows_x: usize,
+    pivots: usize,
+    cols: usize,
+) {
+    assert!(pivots <= cols);
+    assert!(ldr >= pivots && (cols == 0 || r.len() >= ldr * (cols - 1) + pivots));
+    assert!(rows_x == 0 || (ldx >= rows_x && x.len() >= ldx * (cols - 1) + rows_x));
     if rows_x > 0 {
-        for j in 0..cols {
-            let (head, tail) = x.split_at_mut((j + 1) * ldx);
+        for j in 0..pivots {
+            let (head, tail) = x.split_at_mut(((j + 1) * ldx).min(x.len()));
             let v = &mut head[j * ldx..j * ldx + rows_x];
             let sigma = dot(v, v);
             if sigma == 0.0 {
@@ -87,24 +106,71 @@ fn stacked_body(r: &mut [f64], ldr: usize, x: &mut [f64], ldx: usize, rows_x: us
             let alpha = if rjj >= 0.0 { -norm } else { norm };
             let v0 = rjj - alpha;
             let tau = 1.0 / (norm_sq - alpha * rjj);
-            for k in 0..cols - j - 1 {
-                let col = j + 1 + k;
-                let xk = &mut tail[k * ldx..k * ldx + rows_x];
-                let rk = &mut r[col * ldr + j];
-                let f = tau * (v0 * *rk + dot(v, xk));
-                if f != 0.0 {
-                    *rk -= f * v0;
-                    axpy(-f, v, xk);
+            let later = cols - j - 1;
+            // (for the last column there is no later column, and maybe no slice)
+            let pivot_row = r.get_mut((j + 1) * ldr + j..).unwrap_or_default();
+            // The common state dimensions get a copy compiled for a constant row count,
+            // so the short dot/axpy loops unroll; the arithmetic (and so the result) is
+            // the same.
+            match rows_x {
+                1 => reflect_columns::<1>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                2 => reflect_columns::<2>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                3 => reflect_columns::<3>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                4 => reflect_columns::<4>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                5 => reflect_columns::<5>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                6 => reflect_columns::<6>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                7 => reflect_columns::<7>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                8 => reflect_columns::<8>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
+                _ => {
+                    for k in 0..later {
+                        let xk = &mut tail[k * ldx..k * ldx + rows_x];
+                        let rk = &mut pivot_row[k * ldr];
+                        let f = tau * (v0 * *rk + dot(v, xk));
+                        *rk -= f * v0;
+                        axpy(-f, v, xk);
+                    }
                 }
             }
             r[j * ldr + j] = alpha;
         }
     }
-    for j in 0..cols {
+    for j in 0..pivots {
         if r[j * ldr + j] < 0.0 {
             for k in j..cols {
                 r[k * ldr + j] = -r[k * ldr + j];
             }
+        }
+    }
+}
+
+/// Applies the reflector `I - tau (v0; v)(v0; v)'` to `count` later columns: the
+/// pivot-row entries `pivot_row[k * ldr]` and the X parts `x[k * ldx..][..R]`.
+/// `v` (`R` entries, a constant) is copied out of X first: the compiler cannot tell
+/// that the stores to the later columns leave it unchanged, and would reload it for
+/// every column. A zero `f` is applied like any other (it leaves the column as it was).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn reflect_columns<const R: usize>(
+    v: &[f64],
+    v0: f64,
+    tau: f64,
+    pivot_row: &mut [f64],
+    ldr: usize,
+    x: &mut [f64],
+    ldx: usize,
+    count: usize,
+) {
+    let mut v_local = [0.0_f64; R];
+    v_local.copy_from_slice(&v[..R]);
+    for k in 0..count {
+        let xk: &mut [f64; R] = (&mut x[k * ldx..k * ldx + R])
+            .try_into()
+            .expect("a slice of R entries");
+        let rk = &mut pivot_row[k * ldr];
+        let f = tau * (v0 * *rk + dot(&v_local, xk));
+        *rk -= f * v0;
+        for (xi, vi) in xk.iter_mut().zip(&v_local) {
+            *xi -= f * vi;
         }
     }
 }

@@ -104,6 +104,64 @@ proptest! {
     }
 
     #[test]
+    fn leading_triangularisation_is_the_full_one_stopped_early(
+            (r0, x, pivots) in (1usize..9, 1usize..10)
+                .prop_flat_map(|(c, rx)| (matrix(c, c), matrix(rx, c), 0..=c)),
+            ldx_pad in 0usize..3) {
+        // R: the upper triangle of r0; the full triangularisation is the reference
+        let cols = r0.ncols();
+        let rows_x = x.nrows();
+        let r = DMatrix::from_fn(cols, cols, |i, j| if i <= j { r0[(i, j)] } else { 0.0 });
+        let ldx = rows_x + ldx_pad;
+        let mut x_buf = vec![0.0; ldx * cols];
+        for j in 0..cols { for i in 0..rows_x { x_buf[j * ldx + i] = x[(i, j)]; } }
+        let mut full_r = r.as_slice().to_vec();
+        let mut full_x = x_buf.clone();
+        triangularize_stacked(&mut full_r, cols, &mut full_x, ldx, rows_x, cols);
+        // the leading kernel sees R's first `pivots` rows only (R's other rows zero)
+        let mut lead_r = vec![f64::NAN; cols * cols];
+        for j in 0..cols { for i in 0..pivots.min(j + 1) { lead_r[j * cols + i] = r[(i, j)]; } }
+        let mut lead_x = x_buf.clone();
+        triangularize_stacked_leading(&mut lead_r, cols, &mut lead_x, ldx, rows_x, pivots, cols);
+        // rows 0..pivots: the same reflectors in the same order, so the same bits
+        for j in 0..cols {
+            for i in 0..pivots.min(j + 1) {
+                prop_assert_eq!(lead_r[j * cols + i].to_bits(), full_r[j * cols + i].to_bits());
+            }
+        }
+        // trailing block: Z'Z equals the Gram matrix of what R+'R+ leaves over
+        let k = cols - pivots;
+        let z = DMatrix::from_fn(rows_x, k, |i, j| lead_x[(pivots + j) * ldx + i]);
+        let top = DMatrix::from_fn(pivots, cols, |i, j| if i <= j { lead_r[j * cols + i] } else { 0.0 });
+        let mut recon = top.transpose() * &top;
+        let ztz = z.transpose() * &z;
+        for a in 0..k { for b in 0..k { recon[(pivots + a, pivots + b)] += ztz[(a, b)]; } }
+        // rows of R from `pivots` on were taken as zero
+        let rtop = DMatrix::from_fn(cols, cols, |i, j| if i < pivots { r[(i, j)] } else { 0.0 });
+        let gram = rtop.transpose() * &rtop + x.transpose() * &x;
+        prop_assert!((recon - &gram).norm() <= 1e-12 * gram.norm().max(1.0));
+    }
+
+    #[test]
+    fn row_layout_solve_is_the_column_layout_solve(
+            (u, b) in (1usize..10, 1usize..10).prop_flat_map(|(n, k)| (matrix(n, n), matrix(n, k))),
+            zero_pivot in proptest::option::of(0usize..10)) {
+        let n = u.nrows();
+        let mut u = DMatrix::from_fn(n, n, |i, j| if i < j { u[(i, j)] } else if i == j { 1.0 + u[(i, i)].abs() } else { 0.0 });
+        if let Some(z) = zero_pivot.filter(|&z| z < n) { u[(z, z)] = 0.0; }
+        let nrhs = b.ncols();
+        let mut by_columns = b.as_slice().to_vec();
+        solve_upper(u.as_slice(), n, n, &mut by_columns, n, nrhs);
+        let mut by_rows: Vec<f64> = (0..n).flat_map(|i| (0..nrhs).map(move |c| (i, c))).map(|(i, c)| b[(i, c)]).collect();
+        solve_upper_rows(u.as_slice(), n, n, &mut by_rows, nrhs);
+        for i in 0..n {
+            for c in 0..nrhs {
+                prop_assert_eq!(by_rows[i * nrhs + c].to_bits(), by_columns[c * n + i].to_bits());
+            }
+        }
+    }
+
+    #[test]
     fn triangular_solves_have_small_residuals(m in (1usize..8).prop_flat_map(spd),
                                               seed in proptest::collection::vec(-5.0..5.0_f64, 8)) {
         let n = m.nrows();

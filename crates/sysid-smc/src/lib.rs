@@ -32,7 +32,7 @@ mod model;
 pub mod normals;
 pub mod resample;
 mod series;
-mod simd;
+use sysid_linalg::simd;
 pub mod smoother;
 mod streams;
 mod trial_numbers;

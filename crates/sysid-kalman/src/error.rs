@@ -9,6 +9,18 @@ pub enum KalmanError {
     /// A model matrix failed a check (non-finite, non-symmetric, not PSD, ...).
     #[error("invalid model: {0}")]
     Matrix(#[from] LinalgError),
+    /// A model without states or without outputs (an empty `A` or `C`).
+    #[error("a model needs at least one {what}: {matrix} is {rows}x{cols}")]
+    EmptyModel {
+        /// `state` or `output`.
+        what: &'static str,
+        /// The matrix whose size gives the dimension (`A` or `C`).
+        matrix: &'static str,
+        /// Rows found.
+        rows: usize,
+        /// Columns found.
+        cols: usize,
+    },
     /// A model matrix or a data array has the wrong shape.
     #[error("matrix {name} must be {expected_rows}x{expected_cols}, got {rows}x{cols}")]
     Dimension {

@@ -178,13 +178,25 @@ impl ModelBuilder {
     /// Validates and builds the model.
     ///
     /// # Errors
-    /// [`KalmanError::Dimension`] naming the first matrix of the wrong shape;
+    /// [`KalmanError::EmptyModel`] for a model without states (`A` has no rows) or
+    /// without outputs (`C` has no rows); [`KalmanError::Dimension`] naming the first
+    /// matrix of the wrong shape;
     /// [`KalmanError::Matrix`] for a non-finite entry, a non-symmetric covariance or one
     /// that is not positive semi-definite (checked for `Q`, `R`, the joint
     /// `[[Q, S], [S', R]]` and `P1`).
     pub fn build(self) -> Result<LinearGaussianModel> {
         let n = self.a.nrows();
         let p = self.c.nrows();
+        for (what, matrix, m) in [("state", "A", &self.a), ("output", "C", &self.c)] {
+            if m.nrows() == 0 {
+                return Err(KalmanError::EmptyModel {
+                    what,
+                    matrix,
+                    rows: m.nrows(),
+                    cols: m.ncols(),
+                });
+            }
+        }
         let m = match (&self.b, &self.d) {
             (Some(b), _) => b.ncols(),
             (None, Some(d)) => d.ncols(),

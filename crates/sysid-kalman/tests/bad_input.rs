@@ -24,6 +24,52 @@ fn wrong_dimension_names_the_matrix() {
 }
 
 #[test]
+fn a_model_without_states_or_outputs_is_refused() {
+    // (an empty A used to build, and the particle adapter then panicked in an
+    // eigen-decomposition of the empty matrix)
+    let empty = |n: usize, p: usize| {
+        LinearGaussianModel::builder(
+            DMatrix::zeros(n, n),
+            DMatrix::zeros(p, n),
+            DMatrix::zeros(n, n),
+            DMatrix::identity(p, p),
+        )
+        .build()
+    };
+    let err = empty(0, 1).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            KalmanError::EmptyModel {
+                what: "state",
+                matrix: "A",
+                rows: 0,
+                cols: 0
+            }
+        ),
+        "{err:?}"
+    );
+    assert_eq!(
+        err.to_string(),
+        "a model needs at least one state: A is 0x0"
+    );
+    let err = empty(2, 0).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            KalmanError::EmptyModel {
+                what: "output",
+                matrix: "C",
+                rows: 0,
+                cols: 2
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(empty(1, 1).is_ok());
+}
+
+#[test]
 fn non_symmetric_and_indefinite_covariances() {
     let two = || {
         LinearGaussianModel::builder(

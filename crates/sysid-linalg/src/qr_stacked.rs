@@ -113,23 +113,15 @@ pub fn triangularize_stacked_leading(
             // so the short dot/axpy loops unroll; the arithmetic (and so the result) is
             // the same.
             match rows_x {
-                1 => reflect_columns::<1>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                2 => reflect_columns::<2>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                3 => reflect_columns::<3>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                4 => reflect_columns::<4>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                5 => reflect_columns::<5>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                6 => reflect_columns::<6>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                7 => reflect_columns::<7>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                8 => reflect_columns::<8>(v, v0, tau, pivot_row, ldr, tail, ldx, later),
-                _ => {
-                    for k in 0..later {
-                        let xk = &mut tail[k * ldx..k * ldx + rows_x];
-                        let rk = &mut pivot_row[k * ldr];
-                        let f = tau * (v0 * *rk + dot(v, xk));
-                        *rk -= f * v0;
-                        axpy(-f, v, xk);
-                    }
-                }
+                1 => reflect_columns(&local::<1>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                2 => reflect_columns(&local::<2>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                3 => reflect_columns(&local::<3>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                4 => reflect_columns(&local::<4>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                5 => reflect_columns(&local::<5>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                6 => reflect_columns(&local::<6>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                7 => reflect_columns(&local::<7>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                8 => reflect_columns(&local::<8>(v), v0, tau, pivot_row, ldr, tail, ldx, later),
+                _ => reflect_columns(v, v0, tau, pivot_row, ldr, tail, ldx, later),
             }
             r[j * ldr + j] = alpha;
         }
@@ -143,14 +135,23 @@ pub fn triangularize_stacked_leading(
     }
 }
 
+/// A copy of the first `R` entries of `v` (a constant count): for the common state
+/// dimensions the reflector's X part is taken out of X, because the compiler cannot
+/// tell that the stores to the later columns leave it unchanged and would reload it
+/// for every column; the constant length also lets the short loops unroll.
+#[inline(always)]
+fn local<const R: usize>(v: &[f64]) -> [f64; R] {
+    let mut copy = [0.0_f64; R];
+    copy.copy_from_slice(&v[..R]);
+    copy
+}
+
 /// Applies the reflector `I - tau (v0; v)(v0; v)'` to `count` later columns: the
-/// pivot-row entries `pivot_row[k * ldr]` and the X parts `x[k * ldx..][..R]`.
-/// `v` (`R` entries, a constant) is copied out of X first: the compiler cannot tell
-/// that the stores to the later columns leave it unchanged, and would reload it for
-/// every column. A zero `f` is applied like any other (it leaves the column as it was).
+/// pivot-row entries `pivot_row[k * ldr]` and the X parts `x[k * ldx..][..v.len()]`.
+/// A zero `f` is applied like any other (it leaves the column as it was).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn reflect_columns<const R: usize>(
+fn reflect_columns(
     v: &[f64],
     v0: f64,
     tau: f64,
@@ -160,17 +161,12 @@ fn reflect_columns<const R: usize>(
     ldx: usize,
     count: usize,
 ) {
-    let mut v_local = [0.0_f64; R];
-    v_local.copy_from_slice(&v[..R]);
+    let rows = v.len();
     for k in 0..count {
-        let xk: &mut [f64; R] = (&mut x[k * ldx..k * ldx + R])
-            .try_into()
-            .expect("a slice of R entries");
+        let xk = &mut x[k * ldx..k * ldx + rows];
         let rk = &mut pivot_row[k * ldr];
-        let f = tau * (v0 * *rk + dot(&v_local, xk));
+        let f = tau * (v0 * *rk + dot(v, xk));
         *rk -= f * v0;
-        for (xi, vi) in xk.iter_mut().zip(&v_local) {
-            *xi -= f * vi;
-        }
+        axpy(-f, v, xk);
     }
 }

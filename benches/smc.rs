@@ -1,6 +1,6 @@
 //! Criterion group `smc`: bootstrap filter and particle smoothers on `nlbench`
 //! (T = 1000), with throughput in particle-steps (filter) or transition-density
-//! evaluations (smoothers) per second.
+//! evaluations (smoothers) per second; the M = 10 000 filter also on two threads.
 //!
 //! `cargo bench --bench smc`
 
@@ -28,6 +28,21 @@ fn smc(c: &mut Criterion) {
             b.iter(|| black_box(pf.run(&model, &data, 1).unwrap()))
         });
     }
+    // the same M = 10 000 filter with its chunks shared by a team of two threads
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 10_000,
+        parallel: true,
+        ..Default::default()
+    })
+    .unwrap();
+    group.throughput(Throughput::Elements((STEPS * 10_000) as u64));
+    group.bench_function(format!("pf/nlbench/T{STEPS}/M10000/threads2"), |b| {
+        pool.install(|| b.iter(|| black_box(pf.run(&model, &data, 1).unwrap())))
+    });
     let mut pf = ParticleFilter::new(FilterOptions {
         particles: 50,
         store_history: true,

@@ -1,6 +1,8 @@
 //! Rough timing of the SMC kernels on `nlbench` (T = 1000); the criterion group `smc`
 //! and the runner `sysid-bench smc` are the measurements of record.
-//! Usage: `cargo run --release --example pf_quick [pf|tanizaki|ffbsi|reject|all]`
+//! Usage: `cargo run --release --example pf_quick [pf|pf10k|pf2|tanizaki|ffbsi|reject|all]`
+//! (`pf10k`: only the M = 10 000 filter on one thread; `pf2`: the same on a 2-thread
+//! pool with `parallel` set)
 //! (`PF_QUICK_DEFAULT_ONLY=1` stops `tanizaki` after its default settings, for profiling).
 use std::time::Instant;
 use sysid::prelude::*;
@@ -42,6 +44,37 @@ fn main() {
             );
             println!("pf M={m} (history {history}): {ms:.3} ms");
         }
+    }
+    if what == "pf10k" {
+        let mut pf = filter(10_000, false);
+        let ms = median(
+            |r| {
+                pf.run(&model, &data, r).unwrap();
+            },
+            15,
+        );
+        println!("pf M=10000, 1 thread: {ms:.3} ms");
+    }
+    if what == "pf2" || what == "all" {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let mut pf = ParticleFilter::new(FilterOptions {
+            particles: 10_000,
+            parallel: true,
+            ..Default::default()
+        })
+        .unwrap();
+        let ms = pool.install(|| {
+            median(
+                |r| {
+                    pf.run(&model, &data, r).unwrap();
+                },
+                15,
+            )
+        });
+        println!("pf M=10000, 2 threads: {ms:.3} ms");
     }
     if what == "tanizaki" || what == "all" {
         let mut pf = filter(50, true);

@@ -4,6 +4,8 @@
 //! mixes with 10 particles where plain particle Gibbs degenerates; chains are
 //! bit-identical for any thread count.
 
+mod common;
+
 use sysid::kalman::{KalmanWorkspace, Record};
 use sysid::models::{LgssConjugate, LgssFamily, LinearGaussianSmc, System, lgss};
 use sysid::pmcmc::{
@@ -358,11 +360,7 @@ fn chains_are_bit_identical_for_any_thread_count() {
     let data = Series::new(&y, 1).unwrap();
     let family = LgssFamily::default();
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::on_threads(threads, || {
             let a = pmmh(
                 &family,
                 &prior(),

@@ -2,6 +2,8 @@
 //! unbiasedness of the likelihood estimate, smoothed means against RTS, rejection FFBSi
 //! against O(M^2) FFBSi, and bit-identical results for any thread count.
 
+mod common;
+
 use sysid::kalman::{KalmanWorkspace, Record};
 use sysid::models::{LinearGaussianSmc, Nlbench, System, lgss};
 use sysid::smc::{
@@ -304,11 +306,7 @@ fn same_seed_gives_identical_bits_with_one_and_four_threads() {
     let sim = model.simulate(200, 4);
     let data = Series::new(&sim.outputs, 1).unwrap();
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::on_threads(threads, || {
             let mut pf = ParticleFilter::new(FilterOptions {
                 particles: 5000,
                 store_history: true,
@@ -413,6 +411,73 @@ fn tanizaki_by_the_nearest_mean_draws_the_same_bits_as_the_general_kernel() {
             assert!(
                 a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
                 "t = {t}, max_trials {max_trials:?}"
+            );
+        }
+    }
+}
+
+/// Everything a filter run leaves behind, as bits.
+fn filter_bits(pf: &ParticleFilter, loglik: f64, resampled: usize) -> Vec<u64> {
+    let mut bits = vec![loglik.to_bits(), resampled as u64];
+    bits.extend(pf.means().iter().chain(pf.ess()).map(|v| v.to_bits()));
+    if let Some(h) = pf.history() {
+        for t in 0..h.steps() {
+            let floats = h
+                .states(t)
+                .iter()
+                .chain(h.weights(t))
+                .chain(h.log_weights(t));
+            bits.extend(floats.map(|v| v.to_bits()));
+            bits.extend(h.ancestors(t).iter().map(|&a| a as u64));
+        }
+    }
+    bits
+}
+
+/// The filter's team of threads (any size, any split of the chunks) gives the bits of
+/// the sequential filter: chunks that do not divide M, missing outputs, adaptive
+/// resampling with every scheme, eight states with inputs, with and without summaries.
+#[test]
+fn the_filter_team_gives_the_sequential_bits_in_every_setting() {
+    let sim = System::Lti2x2.simulate(60, 5).unwrap();
+    let mut y = sim.record.y.as_slice().to_vec();
+    y[2 * 7] = f64::NAN; // step 7 partly missing
+    y[2 * 20..2 * 23].fill(f64::NAN); // steps 20-22 missing
+    let data = Series::new(&y, 2)
+        .unwrap()
+        .with_inputs(sim.record.u.as_slice(), 2)
+        .unwrap();
+    // (lti2x2 drives its states without noise; the particle filter needs Q > 0)
+    let q = nalgebra::DMatrix::identity(8, 8) * 0.01;
+    let noisy = sysid::models::lti2x2().to_builder().q(q).build().unwrap();
+    let model = LinearGaussianSmc::new(&noisy).unwrap();
+    let mut cases = vec![(2500, Resampling::Systematic, 1.0, true)];
+    for scheme in Resampling::ALL {
+        cases.push((2100, scheme, 0.5, true));
+    }
+    cases.push((3 * 1024, Resampling::Systematic, 1.0, false));
+    for (particles, resampling, ess_threshold, record_summaries) in cases {
+        let run = |threads: usize| {
+            common::on_threads(threads, || {
+                let mut pf = ParticleFilter::new(FilterOptions {
+                    particles,
+                    resampling,
+                    ess_threshold,
+                    store_history: true,
+                    parallel: threads > 1,
+                    record_summaries,
+                })
+                .unwrap();
+                let summary = pf.run(&model, &data, 31).unwrap();
+                filter_bits(&pf, summary.loglik, summary.resampled_steps)
+            })
+        };
+        let sequential = run(1);
+        for threads in [2, 3] {
+            assert!(
+                sequential == run(threads),
+                "{particles} particles, {}, ESS {ess_threshold}, {threads} threads",
+                resampling.name()
             );
         }
     }

@@ -15,3 +15,12 @@ pub fn assert_iterates_match(method: &str, name: &str, values: &[f64], exact: f6
         "{name}: {mean} vs {exact}"
     );
 }
+
+/// Runs `work` on a fresh rayon pool of `threads` threads.
+pub fn on_threads<T: Send>(threads: usize, work: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a rayon pool")
+        .install(work)
+}

@@ -35,6 +35,8 @@ mod series;
 use sysid_linalg::simd;
 pub mod smoother;
 mod streams;
+mod systematic;
+mod team;
 mod trial_numbers;
 mod vexp;
 pub mod weights;

@@ -13,7 +13,7 @@
 use rand::RngExt;
 use rand_distr::{Distribution, Exp1};
 
-use crate::weights::blocked_total;
+pub use crate::systematic::systematic;
 
 /// The resampling scheme of a particle filter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -94,54 +94,6 @@ fn assign_sorted(weights: &[f64], positions: impl Iterator<Item = f64>, out: &mu
     }
 }
 
-/// Systematic resampling with the single uniform `u` in [0, 1): positions `(k + u) / N`.
-///
-/// Computed by counting: `count_i = ceil(N C_i / total - u)` positions lie below the
-/// cumulative weight `C_i`, and the ancestor of position `k` is the number of particles
-/// with `count_i <= k`.
-#[inline(always)]
-pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
-    let n = out.len();
-    // Block sums: no serial chain of additions (the running sums below are one).
-    let total = blocked_total(weights);
-    let scale = n as f64 / total;
-    // out[k] = (largest i with count_i <= k) + 1: mark each count with i + 1 (counts
-    // grow with i, so the last write wins) and take a running maximum. Plain stores,
-    // no data-dependent branches.
-    out.fill(0);
-    let mut cumulative = 0.0;
-    let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
-    for (i, &w) in weights[..last].iter().enumerate() {
-        cumulative += w;
-        mark_count(cumulative, i, scale, u, out);
-    }
-    running_max(out);
-}
-
-/// Marks `out[count] = i + 1` for `count = ceil(cumulative * scale - u)` (clamped at 0;
-/// nothing when it is `out.len()` or more).
-#[inline(always)]
-fn mark_count(cumulative: f64, i: usize, scale: f64, u: f64, out: &mut [usize]) {
-    let n = out.len();
-    // ceil without a libm call: truncate, then add one if something was cut off.
-    let z = cumulative * scale - u;
-    let truncated = z as i64;
-    let count = (truncated + i64::from((truncated as f64) < z)).clamp(0, n as i64) as usize;
-    if count < n {
-        out[count] = i + 1;
-    }
-}
-
-/// Replaces each entry by the largest entry up to it.
-#[inline(always)]
-fn running_max(out: &mut [usize]) {
-    let mut running = 0;
-    for slot in out.iter_mut() {
-        running = running.max(*slot);
-        *slot = running;
-    }
-}
-
 /// Stratified resampling: positions `(k + u_k) / N` with independent uniforms.
 pub fn stratified<R: rand::Rng + ?Sized>(weights: &[f64], rng: &mut R, out: &mut [usize]) {
     let total: f64 = weights.iter().sum();
@@ -205,50 +157,6 @@ pub fn residual<R: rand::Rng + ?Sized>(
 mod tests {
     use super::*;
     use crate::streams::stream;
-
-    /// Systematic resampling by its definition: position `k` goes to the number of
-    /// particles `i < last` whose count `ceil(n C_i / total - u)` is at most `k`, with
-    /// the block-sum total (O(n M), the same floating-point operations).
-    fn systematic_by_definition(weights: &[f64], u: f64, n: usize) -> Vec<usize> {
-        let scale = n as f64 / blocked_total(weights);
-        let last = weights.iter().rposition(|&w| w > 0.0).unwrap_or(0);
-        let mut cumulative = 0.0;
-        let counts: Vec<usize> = weights[..last]
-            .iter()
-            .map(|&w| {
-                cumulative += w;
-                let z = cumulative * scale - u;
-                let truncated = z as i64;
-                (truncated + i64::from((truncated as f64) < z)).clamp(0, n as i64) as usize
-            })
-            .collect();
-        (0..n)
-            .map(|k| counts.iter().filter(|&&c| c <= k).count())
-            .collect()
-    }
-
-    #[test]
-    fn systematic_runs_equal_the_definition() {
-        let mut rng = stream(11, 0);
-        for case in 0..400 {
-            let m = 1 + case % 37;
-            let n = 1 + (case * 7) % 41;
-            let weights: Vec<f64> = (0..m)
-                .map(|i| match (case + i) % 5 {
-                    0 => 0.0,
-                    1 => 30.0 * rng.random::<f64>(), // long runs
-                    _ => rng.random::<f64>(),
-                })
-                .collect();
-            if weights.iter().all(|&w| w == 0.0) {
-                continue;
-            }
-            let u = rng.random::<f64>();
-            let mut out = vec![usize::MAX; n];
-            systematic(&weights, u, &mut out);
-            assert_eq!(out, systematic_by_definition(&weights, u, n), "case {case}");
-        }
-    }
 
     #[test]
     fn every_scheme_keeps_a_point_mass() {

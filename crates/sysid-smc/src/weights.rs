@@ -51,6 +51,12 @@ pub fn normalise_log_weights(log_weights: &[f64], weights: &mut [f64]) -> Option
 /// Effective sample size `1 / sum W_i^2` of normalised weights.
 #[inline]
 pub fn effective_sample_size(weights: &[f64]) -> f64 {
+    1.0 / sum_of_squares(weights)
+}
+
+/// `sum W_i^2`, with four interleaved partial sums (a fixed order).
+#[inline(always)]
+pub fn sum_of_squares(weights: &[f64]) -> f64 {
     let mut acc = [0.0f64; 4];
     let mut chunks = weights.chunks_exact(4);
     for c in &mut chunks {
@@ -59,7 +65,7 @@ pub fn effective_sample_size(weights: &[f64]) -> f64 {
         }
     }
     let tail: f64 = chunks.remainder().iter().map(|w| w * w).sum();
-    1.0 / ((acc[0] + acc[1]) + (acc[2] + acc[3]) + tail)
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Index `i` with `sum_{j<i} w_j <= target < sum_{j<=i} w_j`, for non-negative weights.

@@ -252,8 +252,12 @@ impl TransitionSampler for Nlbench {
         rng: &mut R,
     ) {
         let forcing = self.forcing(t);
+        // gather first (bounds-checked), then the mean with vector divisions
         for (x, &p) in next.iter_mut().zip(parents) {
-            *x = self.mean(from[p], forcing);
+            *x = from[p];
+        }
+        for x in next.iter_mut() {
+            *x = self.mean(*x, forcing);
         }
         add_scaled_normals(rng, self.sd_q, next);
     }

@@ -12,8 +12,10 @@
 //! `L_i` inside each block, and block offsets `O_{b+1} = O_b + L_end(b)`, so that
 //! `C_i = O_b + L_i`. The block running sums are independent, which lets every block
 //! be summed and marked by a different thread; the result (integers) is the same
-//! however the blocks are shared out. With at most one block (M <= [`BLOCK`]) this is
-//! the plain running sum. The total is the sum of the blocks' eight-element block sums.
+//! however the blocks are shared out. Inside a block the running sum goes by groups of
+//! eight: `L_i = K_j + (w_{8j} + ... + w_i)` with the carry `K_{j+1} = K_j + (w_{8j} +
+//! ... + w_{8j+7})`, so that one addition per group, not per particle, waits for the
+//! previous one. The total is the sum of the blocks' eight-element block sums.
 //!
 //! # Complexity
 //! O(M + N) time, no allocation.
@@ -41,16 +43,19 @@ pub(crate) fn systematic_in_blocks(weights: &[f64], u: f64, out: &mut [usize], b
     let last = last_positive(weights);
     out.fill(0);
     let mut offset = 0.0;
+    let mut sums = [0.0; GROUP];
     for (b, chunk) in weights[..last].chunks(block).enumerate() {
-        let mut local = 0.0;
-        for (k, &w) in chunk.iter().enumerate() {
-            local += w;
-            let count = marks.count(offset + local);
-            if count < out.len() {
-                out[count] = b * block + k + 1;
+        let mut carry = 0.0;
+        for (g, group) in chunk.chunks(GROUP).enumerate() {
+            carry = group_running_sums(group, carry, &mut sums);
+            for (k, &local) in sums[..group.len()].iter().enumerate() {
+                let count = marks.count(offset + local);
+                if count < out.len() {
+                    out[count] = b * block + g * GROUP + k + 1;
+                }
             }
         }
-        offset += local;
+        offset += carry;
     }
     running_max(out);
 }
@@ -66,15 +71,31 @@ pub(crate) fn last_positive(weights: &[f64]) -> usize {
 /// end `L_end` and its total as eight-element block sums.
 #[inline(always)]
 pub(crate) fn block_running_sums(weights: &[f64], running: &mut [f64]) -> BlockSums {
-    let mut local = 0.0;
-    for (r, &w) in running.iter_mut().zip(weights) {
-        local += w;
-        *r = local;
+    let mut carry = 0.0;
+    for (group, sums) in weights.chunks(GROUP).zip(running.chunks_mut(GROUP)) {
+        carry = group_running_sums(group, carry, sums);
     }
     BlockSums {
-        end: local,
+        end: carry,
         total: blocked_total(weights),
     }
+}
+
+/// Weights per group of a block's running sums.
+const GROUP: usize = 8;
+
+/// The running sums of one group: `carry` plus the plain running sum of the group
+/// from zero. Returns the last (the next group's carry). Only that one addition waits
+/// for the previous group, so the additions of neighbouring groups overlap instead of
+/// forming one chain through the block.
+#[inline(always)]
+fn group_running_sums(group: &[f64], carry: f64, sums: &mut [f64]) -> f64 {
+    let mut local = 0.0;
+    for (sum, &w) in sums.iter_mut().zip(group) {
+        local += w;
+        *sum = carry + local;
+    }
+    carry + local
 }
 
 /// What [`block_running_sums`] reports of a block.
@@ -95,9 +116,11 @@ pub(crate) struct Marks {
 }
 
 impl Marks {
-    /// The rule for `outputs` positions, the weights' `total` and the uniform `u`.
+    /// The rule for `outputs` positions (fewer than 2^52), the weights' `total` and
+    /// the uniform `u`.
     #[inline(always)]
     pub fn new(outputs: usize, total: f64, u: f64) -> Self {
+        debug_assert!(outputs < 1 << 52);
         Marks {
             outputs,
             scale: outputs as f64 / total,
@@ -105,14 +128,26 @@ impl Marks {
         }
     }
 
-    /// The number of positions below the cumulative weight `cumulative`.
+    /// The number of positions below the cumulative weight `cumulative` (0 for NaN).
+    ///
+    /// Branch-free, so that a block of counts is computed with vector instructions
+    /// (`ceil` is one instruction from SSE 4.1 on; see [`small_integer`]).
     #[inline(always)]
     pub fn count(&self, cumulative: f64) -> usize {
-        // ceil without a libm call: truncate, then add one if something was cut off
-        let z = cumulative * self.scale - self.u;
-        let truncated = z as i64;
-        (truncated + i64::from((truncated as f64) < z)).clamp(0, self.outputs as i64) as usize
+        let z = (cumulative * self.scale - self.u).ceil();
+        let low = if z > 0.0 { z } else { 0.0 }; // NaN -> 0
+        let outputs = self.outputs as f64;
+        small_integer(if low < outputs { low } else { outputs })
     }
+}
+
+/// The value of a whole number `0 <= v < 2^52` held as a float, without the range
+/// and NaN checks of `as`, which keep a conversion from being vectorised: adding 2^52
+/// puts `v` into the low bits of the mantissa exactly.
+#[inline(always)]
+fn small_integer(v: f64) -> usize {
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    ((v + TWO_52).to_bits() - TWO_52.to_bits()) as usize
 }
 
 /// Where one block of particles writes its ancestors: the output slots
@@ -183,18 +218,26 @@ pub(crate) fn mark_block(
 ) {
     out.fill(0);
     let end = last.saturating_sub(first).min(running.len());
-    for (k, &local) in running[..end].iter().enumerate() {
-        // (a slot below the range is impossible for finite weights, whose counts
-        // grow; the wrapping check keeps NaN weights from writing out of range)
-        let slot = marks
-            .count(plan.offset + local)
-            .wrapping_sub(plan.first_slot);
-        if slot < out.len() {
-            out[slot] = first + k + 1;
+    let mut counts = [0usize; COUNT_GROUP];
+    for (g, group) in running[..end].chunks(COUNT_GROUP).enumerate() {
+        // the counts first (vectorised), then the scattered marks
+        for (count, &local) in counts.iter_mut().zip(group) {
+            *count = marks.count(plan.offset + local);
+        }
+        for (k, &count) in counts[..group.len()].iter().enumerate() {
+            // (a slot below the range is impossible for finite weights, whose counts
+            // grow; the wrapping check keeps NaN weights from writing out of range)
+            let slot = count.wrapping_sub(plan.first_slot);
+            if slot < out.len() {
+                out[slot] = first + g * COUNT_GROUP + k + 1;
+            }
         }
     }
     running_max(out);
 }
+
+/// Counts computed together before their marks are stored.
+const COUNT_GROUP: usize = 32;
 
 /// Replaces each entry by the largest entry up to it.
 #[inline(always)]
@@ -214,7 +257,7 @@ mod tests {
 
     /// Systematic resampling by its definition: position `k` goes to the number of
     /// particles `i < last` whose count is at most `k` (O(n M), the same floating-point
-    /// operations, with the running sums restarted every `block` particles).
+    /// operations: running sums by groups of eight, restarted every `block` particles).
     fn by_definition(weights: &[f64], u: f64, n: usize, block: usize) -> Vec<usize> {
         let total = weights
             .chunks(block)
@@ -226,12 +269,16 @@ mod tests {
         let mut counts = Vec::new();
         let mut offset = 0.0;
         for chunk in weights.chunks(block) {
-            let mut local = 0.0;
-            for &w in chunk {
-                local += w;
-                counts.push(marks.count(offset + local));
+            let mut carry = 0.0; // K_j
+            for group in chunk.chunks(8) {
+                let mut partial = 0.0;
+                for &w in group {
+                    partial += w;
+                    counts.push(marks.count(offset + (carry + partial)));
+                }
+                carry += partial;
             }
-            offset += local;
+            offset += carry;
         }
         counts.truncate(last);
         (0..n)
@@ -283,7 +330,7 @@ mod tests {
         for case in 0..600 {
             let m = 1 + case % 37;
             let n = 1 + (case * 7) % 41;
-            let block = 1 + case % 9;
+            let block = 1 + case % 23;
             let mut weights = random_weights(case, m, &mut rng);
             if case.is_multiple_of(11) {
                 // zero tails: blocks past the last positive weight write nothing
@@ -307,21 +354,17 @@ mod tests {
     }
 
     #[test]
-    fn one_block_is_the_plain_running_sum() {
-        let mut rng = stream(12, 0);
-        for case in 0..100 {
-            let weights = random_weights(case, 1 + case % 50, &mut rng);
-            if weights.iter().all(|&w| w == 0.0) {
-                continue;
-            }
-            let u = rng.random::<f64>();
-            let n = 1 + case % 23;
-            let mut one = vec![0; n];
-            systematic_in_blocks(&weights, u, &mut one, 64);
-            let mut whole = vec![0; n];
-            systematic_in_blocks(&weights, u, &mut whole, usize::MAX);
-            assert_eq!(one, whole, "case {case}");
+    fn small_integers_convert_exactly() {
+        for v in [0usize, 1, 2, 1023, 1 << 30, (1 << 52) - 1] {
+            assert_eq!(small_integer(v as f64), v);
         }
+        let marks = Marks::new(10, 1.0, 0.5);
+        assert_eq!(marks.count(f64::NAN), 0);
+        assert_eq!(marks.count(-3.0), 0);
+        assert_eq!(marks.count(0.25), 2); // ceil(2.5 - 0.5) = 2
+        assert_eq!(marks.count(0.26), 3); // ceil(2.1) = 3
+        assert_eq!(marks.count(7.0), 10);
+        assert_eq!(marks.count(f64::INFINITY), 10);
     }
 
     #[test]

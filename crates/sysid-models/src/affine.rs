@@ -77,7 +77,7 @@ impl AffineModel for NlbenchAffine {
     }
 
     fn regressors_batch(&self, t: usize, states: &[f64], _u: &[f64], out: &mut [f64]) {
-        let forcing = (1.2 * (t as f64 + 1.0)).cos();
+        let forcing = crate::nlbench::forcing_cosine(t);
         for (&x, alpha) in states.iter().zip(out.chunks_exact_mut(4)) {
             alpha[0] = x;
             alpha[1] = x / (1.0 + x * x);

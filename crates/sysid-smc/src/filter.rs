@@ -100,7 +100,7 @@ pub struct FilterOptions {
     pub store_history: bool,
     /// Share the particle chunks of every step among as many threads as the current
     /// rayon pool has (at most one per chunk of [`CHUNK`] particles). The result does
-    /// not depend on it. Pays from a few chunks up (M = 10 000 on two threads: 1.7x);
+    /// not depend on it. Pays from a few chunks up (M = 10 000 on two threads: about 1.6x);
     /// leave it off when independent runs already fill the cores. Default false.
     pub parallel: bool,
     /// Record the filtered mean and the effective sample size of every step

@@ -168,7 +168,6 @@ pub struct ParticleFilter {
     running_sums: Vec<f64>,
     chunk_sums: Vec<ChunkSums>,
     chunk_means: Vec<f64>,
-    block_sums: Vec<BlockSums>,
     plan: Vec<BlockPlan>,
     scratch: ResampleScratch,
     rngs: Vec<Rng>,
@@ -195,7 +194,6 @@ impl ParticleFilter {
             running_sums: Vec::new(),
             chunk_sums: Vec::new(),
             chunk_means: Vec::new(),
-            block_sums: Vec::new(),
             plan: Vec::new(),
             scratch: ResampleScratch::default(),
             rngs: Vec::new(),
@@ -497,13 +495,10 @@ impl ParticleFilter {
     /// Plans systematic resampling by blocks from the chunks' running sums, with the
     /// uniform `u`.
     fn plan_systematic(&mut self, u: f64) -> SystematicMarks {
-        self.block_sums.clear();
-        self.block_sums
-            .extend(self.chunk_sums.iter().map(|s| s.running));
         let last = last_positive(&self.weights);
         let marks = plan_blocks(
             &self.weights,
-            &self.block_sums,
+            self.chunk_sums.iter().map(|s| s.running),
             CHUNK,
             u,
             self.options.particles,

@@ -31,33 +31,42 @@ pub fn systematic(weights: &[f64], u: f64, out: &mut [usize]) {
     systematic_in_blocks(weights, u, out, BLOCK);
 }
 
-/// [`systematic`] with running sums in blocks of `block` particles.
+/// [`systematic`] with running sums in blocks of `block <= BLOCK` particles: the
+/// blocks of [`plan_blocks`] and [`mark_block`] one after another, each block's running
+/// sums on the stack.
 #[inline(always)]
 pub(crate) fn systematic_in_blocks(weights: &[f64], u: f64, out: &mut [usize], block: usize) {
-    let total: f64 = weights
+    assert!(block <= BLOCK, "blocks of at most BLOCK particles");
+    let total = weights
         .chunks(block)
         .map(blocked_total)
-        .reduce(|a, b| a + b)
-        .unwrap_or(0.0);
-    let marks = Marks::new(out.len(), total, u);
+        .reduce(|a, b| a + b);
+    let marks = Marks::new(out.len(), total.unwrap_or(0.0), u);
     let last = last_positive(weights);
-    out.fill(0);
-    let mut offset = 0.0;
-    let mut sums = [0.0; GROUP];
-    for (b, chunk) in weights[..last].chunks(block).enumerate() {
-        let mut carry = 0.0;
-        for (g, group) in chunk.chunks(GROUP).enumerate() {
-            carry = group_running_sums(group, carry, &mut sums);
-            for (k, &local) in sums[..group.len()].iter().enumerate() {
-                let count = marks.count(offset + local);
-                if count < out.len() {
-                    out[count] = b * block + g * GROUP + k + 1;
-                }
-            }
-        }
-        offset += carry;
+    if weights.is_empty() {
+        out.fill(0);
+        return;
     }
-    running_max(out);
+    // (the blocks' slot ranges cover every output: the first starts at 0, each ends
+    // where the next starts, the last one at the end)
+    let mut running = [0.0; BLOCK];
+    let mut plan = BlockPlan::default();
+    for (b, chunk) in weights.chunks(block).enumerate() {
+        let first = b * block;
+        if b > 0 && first >= last {
+            break; // the block before took the slots up to the end
+        }
+        let running = &mut running[..chunk.len()];
+        let next_offset = plan.offset + block_running_sums(chunk, running).end;
+        plan.end_slot = first_slot(weights, b + 1, block, next_offset, last, &marks);
+        let slots = &mut out[plan.first_slot..plan.end_slot];
+        mark_block(running, first, last, &plan, &marks, slots);
+        plan = BlockPlan {
+            offset: next_offset,
+            first_slot: plan.end_slot,
+            end_slot: 0,
+        };
+    }
 }
 
 /// The index after which every weight is zero (0 when at most the first is positive):
@@ -170,30 +179,21 @@ pub(crate) struct BlockPlan {
 /// takes the slots up to the end.
 pub(crate) fn plan_blocks(
     weights: &[f64],
-    sums: &[BlockSums],
+    sums: impl Iterator<Item = BlockSums> + Clone,
     block: usize,
     u: f64,
     outputs: usize,
     last: usize,
     plan: &mut Vec<BlockPlan>,
 ) -> Marks {
-    let total = sums.iter().map(|s| s.total).reduce(|a, b| a + b);
+    let total = sums.clone().map(|s| s.total).reduce(|a, b| a + b);
     let marks = Marks::new(outputs, total.unwrap_or(0.0), u);
     plan.clear();
     let mut offset = 0.0;
-    for (b, sums) in sums.iter().enumerate() {
-        let first = b * block;
-        let first_slot = if b == 0 {
-            0
-        } else if first < last {
-            // L_first = 0 + w_first = w_first
-            marks.count(offset + weights[first])
-        } else {
-            outputs
-        };
+    for (b, sums) in sums.enumerate() {
         plan.push(BlockPlan {
             offset,
-            first_slot,
+            first_slot: first_slot(weights, b, block, offset, last, &marks),
             end_slot: outputs,
         });
         offset += sums.end;
@@ -202,6 +202,28 @@ pub(crate) fn plan_blocks(
         plan[b - 1].end_slot = plan[b].first_slot;
     }
     marks
+}
+
+/// The first output slot of block `b` with running-sum offset `offset`: 0 for the
+/// first block, the count of its first particle (`L_first = 0 + w_first = w_first`)
+/// while that is below `last`, else past the end (the block writes nothing).
+#[inline(always)]
+fn first_slot(
+    weights: &[f64],
+    b: usize,
+    block: usize,
+    offset: f64,
+    last: usize,
+    marks: &Marks,
+) -> usize {
+    let first = b * block;
+    if b == 0 {
+        0
+    } else if first < last {
+        marks.count(offset + weights[first])
+    } else {
+        marks.outputs
+    }
 }
 
 /// Writes the ancestors of one block's slots `out = [first_slot, end_slot)` from its
@@ -296,7 +318,7 @@ mod tests {
             .collect();
         let last = last_positive(weights);
         let mut plan = Vec::new();
-        let marks = plan_blocks(weights, &sums, block, u, n, last, &mut plan);
+        let marks = plan_blocks(weights, sums.iter().copied(), block, u, n, last, &mut plan);
         let mut out = vec![usize::MAX; n];
         for (b, p) in plan.iter().enumerate() {
             assert!(p.first_slot <= p.end_slot);

@@ -5,38 +5,50 @@
 mod common;
 
 use proptest::prelude::*;
-use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions, m_step, q_hat};
+use sysid::em::gradient::{GradientEm, GradientModel, Gradients, MStepOptions, m_step, q_hat};
 use sysid::em::linear::{Covariance, LinearEm, LinearEmSpec};
 use sysid::em::{EmAlgorithm, EmOptions, run_em};
 use sysid::models::{LgssGradient, System};
 use sysid::smc::{FfbsiReject, Series, Trajectories};
 
-/// `lgss`'s gradient model with finite-difference gradients (the trait's default).
-struct NumericLgss(LgssGradient);
+/// A gradient model with its shortcuts switched off: no closed-form dynamics step
+/// (BFGS over every parameter), and with `finite_differences` the trait's default
+/// central differences instead of the analytic gradients.
+struct Plain<G> {
+    inner: G,
+    finite_differences: bool,
+}
 
-impl GradientModel for NumericLgss {
-    type Smc = <LgssGradient as GradientModel>::Smc;
-    type Params = <LgssGradient as GradientModel>::Params;
+impl<G: GradientModel> GradientModel for Plain<G> {
+    type Smc = G::Smc;
+    type Params = G::Params;
     fn parameter_dim(&self) -> usize {
-        self.0.parameter_dim()
+        self.inner.parameter_dim()
     }
     fn state_dim(&self) -> usize {
-        1
+        self.inner.state_dim()
     }
     fn parameter_names(&self) -> Vec<String> {
-        self.0.parameter_names()
+        self.inner.parameter_names()
     }
     fn constrained(&self, theta: &[f64]) -> Vec<f64> {
-        self.0.constrained(theta)
+        self.inner.constrained(theta)
     }
     fn smc_model(&self, theta: &[f64]) -> Result<Self::Smc, sysid::em::gradient::GradientEmError> {
-        self.0.smc_model(theta)
+        self.inner.smc_model(theta)
     }
     fn unpack(&self, theta: &[f64]) -> Self::Params {
-        self.0.unpack(theta)
+        self.inner.unpack(theta)
+    }
+    fn gradients(&self) -> Gradients {
+        if self.finite_differences {
+            Gradients::FiniteDifferences
+        } else {
+            self.inner.gradients()
+        }
     }
     fn log_initial(&self, p: &Self::Params, x: &[f64]) -> f64 {
-        self.0.log_initial(p, x)
+        self.inner.log_initial(p, x)
     }
     fn log_transition(
         &self,
@@ -46,10 +58,35 @@ impl GradientModel for NumericLgss {
         u: &[f64],
         next: &[f64],
     ) -> f64 {
-        self.0.log_transition(p, t, x, u, next)
+        self.inner.log_transition(p, t, x, u, next)
     }
     fn log_observation(&self, p: &Self::Params, t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {
-        self.0.log_observation(p, t, x, u, y)
+        self.inner.log_observation(p, t, x, u, y)
+    }
+    fn log_initial_gradient(&self, p: &Self::Params, x: &[f64], grad: &mut [f64]) -> f64 {
+        self.inner.log_initial_gradient(p, x, grad)
+    }
+    fn log_transition_gradient(
+        &self,
+        p: &Self::Params,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
+        self.inner.log_transition_gradient(p, t, x, u, next, grad)
+    }
+    fn log_observation_gradient(
+        &self,
+        p: &Self::Params,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        y: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
+        self.inner.log_observation_gradient(p, t, x, u, y, grad)
     }
 }
 
@@ -98,7 +135,10 @@ proptest! {
         let data = Series::new(&y, 1).unwrap();
         let theta = [phi, ln_q, ln_r];
         let analytic = LgssGradient { p1: 1.0, fixed_r: None };
-        let numeric = NumericLgss(analytic);
+        let numeric = Plain {
+            inner: analytic,
+            finite_differences: true,
+        };
         let mut grad = vec![0.0; 3];
         let mut grad_default = vec![0.0; 3];
         let q = q_hat(&analytic, &theta, &paths, &data, Some(&mut grad)).unwrap();
@@ -285,4 +325,81 @@ fn wiener_gradient_matches_central_differences() {
             );
         }
     }
+}
+
+#[test]
+fn wiener_closed_form_dynamics_step_is_the_maximiser_bfgs_finds() {
+    use rand::RngExt;
+    use sysid::models::{BlindWiener, WienerEstimate, WienerModel};
+    let steps = 200;
+    let sim = BlindWiener::simulate(steps, 5);
+    let data = Series::new(&sim.outputs, 2).unwrap();
+    let model = WienerModel::default();
+    // four paths near the linear part's output and its lag, with uniform noise
+    let mut rng = sysid::smc::stream(11, 0);
+    let mut states = Vec::new();
+    for t in 0..steps {
+        for k in 0..4 {
+            states.push(sim.z[t] + 0.3 * (rng.random::<f64>() - 0.5));
+            let lag = if t == 0 { 0.0 } else { sim.z[t - 1] };
+            states.push(lag + 0.2 * (rng.random::<f64>() - 0.5) + 0.1 * k as f64);
+        }
+    }
+    let paths = Trajectories::from_states(steps, 4, 2, states).unwrap();
+    let start = WienerEstimate {
+        a: [[0.5, 0.1], [-0.3, 0.2]],
+        q: [[2.0, -0.5], [-0.5, 1.0]],
+        beta: [-2.5, 2.5, -1.0, 1.5],
+        r: [0.1, 0.1],
+    }
+    .theta()
+    .unwrap();
+
+    let mut closed = start.clone();
+    let held = model
+        .maximise_dynamics(&paths, &mut closed)
+        .expect("a closed form");
+    assert_eq!(held, (0..7).collect::<Vec<_>>());
+    assert_eq!(closed[7..], start[7..]);
+    // first-order optimality in the dynamics' entries, and a higher Q^ than at the start
+    let (mut grad_start, mut grad_closed) = (vec![0.0; 13], vec![0.0; 13]);
+    let q_start = q_hat(&model, &start, &paths, &data, Some(&mut grad_start)).unwrap();
+    let q_closed = q_hat(&model, &closed, &paths, &data, Some(&mut grad_closed)).unwrap();
+    assert!(q_closed > q_start + 1.0, "{q_closed} vs {q_start}");
+    let scale = grad_start[..7].iter().fold(1.0f64, |m, g| m.max(g.abs()));
+    for (i, g) in grad_closed[..7].iter().enumerate() {
+        assert!(
+            g.abs() < 1e-9 * scale,
+            "entry {i}: gradient {g} at the closed form"
+        );
+    }
+
+    // direct optimisation: BFGS over all 13 entries reaches the same dynamics
+    let options = MStepOptions {
+        max_iterations: 1000,
+        tol_grad: 1e-10,
+    };
+    let all_by_bfgs = Plain {
+        inner: model,
+        finite_differences: false,
+    };
+    let bfgs = m_step(&all_by_bfgs, &paths, &data, &start, &options, None).unwrap();
+    for (i, (b, c)) in bfgs.theta[..7].iter().zip(&closed[..7]).enumerate() {
+        assert!(
+            (b - c).abs() < 1e-5 * c.abs().max(1.0),
+            "entry {i}: BFGS {b} vs closed form {c} ({})",
+            bfgs.status
+        );
+    }
+
+    // the M-step with the closed form: the same dynamics, BFGS on the rest, Q^ up
+    let out = m_step(&model, &paths, &data, &start, &options, None).unwrap();
+    assert_eq!(out.theta[..7], closed[..7]);
+    assert!(out.q_after >= q_closed, "{} vs {q_closed}", out.q_after);
+    assert!(
+        (out.q_after - bfgs.q_after).abs() < 1e-6 * bfgs.q_after.abs(),
+        "closed form + BFGS {} vs BFGS {}",
+        out.q_after,
+        bfgs.q_after
+    );
 }

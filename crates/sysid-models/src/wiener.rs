@@ -5,8 +5,8 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_em::gradient::{GradientEmError, GradientModel, Gradients};
 use sysid_smc::{
-    InitialSampler, ObservationDensity, StateSpace, TransitionBound, TransitionDensity,
-    TransitionSampler, stream,
+    InitialSampler, ObservationDensity, StateSpace, Trajectories, TransitionBound,
+    TransitionDensity, TransitionSampler, stream,
 };
 
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -354,6 +354,49 @@ impl GradientModel for WienerModel {
         })
     }
 
+    /// `A` and `Q` by least squares of `x_{t+1}` on `x_t` over every path and step:
+    /// `A = S10 S00^-1` (a Cholesky solve) and `Q` the mean outer product of the
+    /// residuals (PSD by construction). `x_0`'s law has no free parameter, so this is
+    /// the exact maximiser of `I1 + I2` over entries 0..7.
+    fn maximise_dynamics(&self, paths: &Trajectories, theta: &mut [f64]) -> Option<Vec<usize>> {
+        let pairs = paths.paths() * paths.steps().checked_sub(1)?;
+        if pairs < 2 || theta.len() != 13 {
+            return None;
+        }
+        let mut s00 = [[0.0; 2]; 2];
+        let mut s10 = [[0.0; 2]; 2];
+        for_each_pair(paths, |x, next| {
+            for i in 0..2 {
+                for j in 0..2 {
+                    s00[i][j] += x[i] * x[j];
+                    s10[i][j] += next[i] * x[j];
+                }
+            }
+        });
+        let l = cholesky2(&s00)?;
+        let a = [solve_cholesky2(l, s10[0]), solve_cholesky2(l, s10[1])];
+        let mut q = [[0.0; 2]; 2];
+        for_each_pair(paths, |x, next| {
+            let e = [
+                next[0] - (a[0][0] * x[0] + a[0][1] * x[1]),
+                next[1] - (a[1][0] * x[0] + a[1][1] * x[1]),
+            ];
+            for i in 0..2 {
+                for j in 0..2 {
+                    q[i][j] += e[i] * e[j];
+                }
+            }
+        });
+        q.iter_mut().flatten().for_each(|v| *v /= pairs as f64);
+        let (l11, l21, l22) = cholesky2(&q)?;
+        let dynamics = [a[0][0], a[0][1], a[1][0], a[1][1], l11.ln(), l21, l22.ln()];
+        if dynamics.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        theta[..7].copy_from_slice(&dynamics);
+        Some((0..7).collect())
+    }
+
     fn log_initial(&self, _p: &Unpacked, x: &[f64]) -> f64 {
         -LN_2PI - self.p1.ln() - 0.5 * (x[0] * x[0] + x[1] * x[1]) / self.p1
     }
@@ -429,6 +472,39 @@ impl GradientModel for WienerModel {
         }
         p.observation(z, y)
     }
+}
+
+/// Calls `f(x_t, x_{t+1})` for every path and step of two-dimensional `paths`.
+fn for_each_pair(paths: &Trajectories, mut f: impl FnMut(&[f64], &[f64])) {
+    for t in 0..paths.steps().saturating_sub(1) {
+        for (x, next) in paths
+            .states(t)
+            .chunks_exact(2)
+            .zip(paths.states(t + 1).chunks_exact(2))
+        {
+            f(x, next);
+        }
+    }
+}
+
+/// `(L11, L21, L22)` of the Cholesky factor of a symmetric 2x2 matrix, if it is
+/// positive definite.
+fn cholesky2(m: &[[f64; 2]; 2]) -> Option<(f64, f64, f64)> {
+    let l11 = m[0][0].sqrt();
+    if l11.is_nan() || l11 <= 0.0 {
+        return None;
+    }
+    let l21 = m[1][0] / l11;
+    let l22 = (m[1][1] - l21 * l21).sqrt();
+    (l22 > 0.0).then_some((l11, l21, l22))
+}
+
+/// `v` with `L L' v = b`.
+fn solve_cholesky2((l11, l21, l22): (f64, f64, f64), b: [f64; 2]) -> [f64; 2] {
+    let w0 = b[0] / l11;
+    let w1 = (b[1] - l21 * w0) / l22;
+    let v1 = w1 / l22;
+    [(w0 - l21 * v1) / l11, v1]
 }
 
 /// [`WienerModel`] at fixed parameters, as a particle model.

@@ -17,9 +17,13 @@
 //!    M-step's inverse-Hessian estimate (the identity at first). `Q^` never decreases
 //!    within an M-step.
 //!
-//! A closed-form sub-step for a linear Gaussian part (as in affine EM) is not used:
-//! the blind Wiener model's linear part and nonlinearity share the state, and one BFGS
-//! over all parameters keeps the code to one path. Iteration `k` draws from the random
+//! A model whose dynamics are linear Gaussian can give their closed-form maximiser
+//! ([`GradientModel::maximise_dynamics`]; the blind Wiener model does): the M-step then
+//! sets the dynamics by least squares on the fixed trajectories and runs BFGS on `I3`
+//! over the remaining parameters only. On fixed trajectories `I1 + I2` and `I3`
+//! depend on disjoint parameters, so this reaches the same maximiser as BFGS over
+//! everything, exactly in the dynamics and with fewer and cheaper evaluations.
+//! Iteration `k` draws from the random
 //! streams `(seed, 2k)` (filter) and `(seed, 2k + 1)` (smoother). The trace value is the
 //! filter's log-likelihood estimate at `theta_k`; the E-step is noisy, so the runner
 //! counts decreases instead of stopping on them.

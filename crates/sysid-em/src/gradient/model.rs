@@ -2,7 +2,7 @@
 //! and, optionally, their gradients.
 
 use super::GradientEmError;
-use sysid_smc::{FilterModel, TransitionDensity};
+use sysid_smc::{FilterModel, Trajectories, TransitionDensity};
 
 /// How the gradient of `Q^` is obtained.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,6 +46,25 @@ pub trait GradientModel: Sync {
     /// Whether the `*_gradient` methods are implemented. Default: finite differences.
     fn gradients(&self) -> Gradients {
         Gradients::FiniteDifferences
+    }
+
+    /// A closed-form maximiser of the dynamics terms `I1 + I2` of `Q^` on fixed
+    /// trajectories, for models that have one (a linear Gaussian transition: a
+    /// regression of `x_{t+1}` on `x_t`).
+    ///
+    /// It writes the maximiser into the dynamics' entries of `theta` and returns their
+    /// indices; the M-step then maximises `I3` by BFGS over the other entries only
+    /// (block-coordinate ascent, so `Q^` still cannot decrease, and each BFGS
+    /// evaluation skips the transition terms). `None`, the default, leaves `theta`
+    /// alone and BFGS maximises `Q^` over every entry; a model also returns `None` when
+    /// the closed form does not exist for these trajectories (a singular moment
+    /// matrix).
+    ///
+    /// Contract: `log mu` and `log f` depend on no entry outside the returned ones,
+    /// and `log g` on none of them.
+    fn maximise_dynamics(&self, paths: &Trajectories, theta: &mut [f64]) -> Option<Vec<usize>> {
+        let _ = (paths, theta);
+        None
     }
 
     /// `log mu_theta(x_0)`.

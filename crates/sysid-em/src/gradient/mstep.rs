@@ -7,6 +7,7 @@ use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::BFGS;
 use sysid_smc::{Series, Trajectories};
 
+use super::objective::{Terms, q_hat_terms};
 use super::{GradientEmError, GradientModel, q_hat};
 
 /// Settings of the BFGS M-step.
@@ -54,40 +55,75 @@ struct Evaluation {
 
 /// `-Q^(theta) / T` and its gradient, computed together and cached for the last
 /// point (argmin asks for the cost and the gradient separately).
+///
+/// With `free`, BFGS moves only those entries of `theta` (the rest stay at `base`'s
+/// values, the dynamics' closed-form maximiser) and the cost is `-I3 / T`.
 struct NegativeQ<'a, G> {
     model: &'a G,
     paths: &'a Trajectories,
     data: &'a Series<'a>,
     scale: f64,
+    base: Vec<f64>,
+    free: Option<Vec<usize>>,
     cache: RefCell<Option<Evaluation>>,
     evaluations: RefCell<usize>,
 }
 
 impl<G: GradientModel> NegativeQ<'_, G> {
-    fn evaluate(&self, theta: &[f64]) -> Result<(f64, Vec<f64>), argmin::core::Error> {
+    /// The full parameter vector of BFGS's point.
+    fn full(&self, point: &[f64]) -> Vec<f64> {
+        match &self.free {
+            None => point.to_vec(),
+            Some(free) => {
+                let mut theta = self.base.clone();
+                for (&i, &v) in free.iter().zip(point) {
+                    theta[i] = v;
+                }
+                theta
+            }
+        }
+    }
+
+    fn evaluate(&self, point: &[f64]) -> Result<(f64, Vec<f64>), argmin::core::Error> {
         if let Some(e) = self.cache.borrow().as_ref()
-            && e.theta.as_slice() == theta
+            && e.theta.as_slice() == point
         {
             return Ok((e.cost, e.grad.clone()));
         }
-        if theta.iter().any(|v| !v.is_finite()) {
+        if point.iter().any(|v| !v.is_finite()) {
             return Err(argmin::core::Error::msg(format!(
-                "the line search reached non-finite parameters {theta:?}"
+                "the line search reached non-finite parameters {point:?}"
             )));
         }
-        let mut grad = vec![0.0; theta.len()];
-        let q = q_hat(self.model, theta, self.paths, self.data, Some(&mut grad))
-            .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
+        let theta = self.full(point);
+        let terms = match self.free {
+            None => Terms::All,
+            Some(_) => Terms::Observations,
+        };
+        let mut full_grad = vec![0.0; theta.len()];
+        let q = q_hat_terms(
+            self.model,
+            &theta,
+            self.paths,
+            self.data,
+            Some(&mut full_grad),
+            terms,
+        )
+        .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
         *self.evaluations.borrow_mut() += 1;
-        if !q.is_finite() || grad.iter().any(|g| !g.is_finite()) {
+        if !q.is_finite() || full_grad.iter().any(|g| !g.is_finite()) {
             return Err(argmin::core::Error::msg(format!(
                 "Q^ or its gradient is not finite at theta = {theta:?}"
             )));
         }
         let cost = -q * self.scale;
+        let mut grad = match &self.free {
+            None => full_grad,
+            Some(free) => free.iter().map(|&i| full_grad[i]).collect(),
+        };
         grad.iter_mut().for_each(|g| *g *= -self.scale);
         *self.cache.borrow_mut() = Some(Evaluation {
-            theta: theta.to_vec(),
+            theta: point.to_vec(),
             cost,
             grad: grad.clone(),
         });
@@ -118,9 +154,13 @@ impl<G: GradientModel> Gradient for NegativeQ<'_, G> {
 /// first inverse Hessian). `inverse_hessian` warm-starts BFGS (the previous M-step's
 /// final estimate: consecutive `Q^` differ little); `None` starts from the identity.
 ///
+/// When the model has a closed-form dynamics step
+/// ([`GradientModel::maximise_dynamics`]), the dynamics' entries are set to it first
+/// and BFGS maximises `I3` over the other entries only.
+///
 /// The result never has a smaller `Q^` than `start`: if BFGS fails (a non-finite
-/// value at a trial point) or ends lower, the best point it visited is kept, or
-/// `start` itself.
+/// value at a trial point) or ends lower, the best point it visited is kept, or the
+/// closed-form point, or `start` itself.
 pub fn m_step<G: GradientModel>(
     model: &G,
     paths: &Trajectories,
@@ -129,18 +169,30 @@ pub fn m_step<G: GradientModel>(
     options: &MStepOptions,
     inverse_hessian: Option<Vec<Vec<f64>>>,
 ) -> Result<MStepOutcome, GradientEmError> {
-    let d = start.len();
     let q_before = q_hat(model, start, paths, data, None)?;
     if !q_before.is_finite() {
         return Err(GradientEmError::NonFiniteQ {
             theta: start.to_vec(),
         });
     }
+    let mut base = start.to_vec();
+    let free = model.maximise_dynamics(paths, &mut base).map(|held| {
+        (0..start.len())
+            .filter(|i| !held.contains(i))
+            .collect::<Vec<_>>()
+    });
+    let first_point: Vec<f64> = match &free {
+        None => start.to_vec(),
+        Some(free) => free.iter().map(|&i| base[i]).collect(),
+    };
+    let d = first_point.len();
     let problem = NegativeQ {
         model,
         paths,
         data,
         scale: 1.0 / data.steps() as f64,
+        base: base.clone(),
+        free,
         cache: RefCell::new(None),
         evaluations: RefCell::new(0),
     };
@@ -161,7 +213,7 @@ pub fn m_step<G: GradientModel>(
     let result = Executor::new(problem, solver)
         .configure(|state| {
             state
-                .param(start.to_vec())
+                .param(first_point)
                 .inv_hessian(first_inverse)
                 .max_iters(options.max_iterations)
         })
@@ -169,13 +221,12 @@ pub fn m_step<G: GradientModel>(
     let (candidate, status, evaluations, final_inverse) = match result {
         Ok(mut r) => {
             let status = r.state.get_termination_status().to_string();
-            let evaluations = r
-                .problem
-                .problem
-                .as_ref()
-                .map_or(0, |p| *p.evaluations.borrow());
+            let problem = r.problem.problem.take();
+            let evaluations = problem.as_ref().map_or(0, |p| *p.evaluations.borrow());
             let inverse = r.state.take_inv_hessian();
-            (r.state.take_best_param(), status, evaluations, inverse)
+            let best = r.state.take_best_param();
+            let candidate = best.zip(problem).map(|(point, p)| p.full(&point));
+            (candidate, status, evaluations, inverse)
         }
         Err(e) => (None, format!("error: {e}"), 0, None),
     };
@@ -187,11 +238,12 @@ pub fn m_step<G: GradientModel>(
         status,
         inverse_hessian: final_inverse,
     };
-    if let Some(theta) = candidate {
+    for theta in candidate.into_iter().chain(std::iter::once(base)) {
         let q = q_hat(model, &theta, paths, data, None)?;
         if q.is_finite() && q >= q_before {
             outcome.theta = theta;
             outcome.q_after = q;
+            break;
         }
     }
     Ok(outcome)

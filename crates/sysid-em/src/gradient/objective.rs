@@ -23,6 +23,27 @@ pub fn q_hat<G: GradientModel>(
     data: &Series,
     grad: Option<&mut [f64]>,
 ) -> Result<f64, GradientEmError> {
+    q_hat_terms(model, theta, paths, data, grad, Terms::All)
+}
+
+/// Which terms of `Q^` to sum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Terms {
+    /// `I1 + I2 + I3`.
+    All,
+    /// `I3` only (the dynamics are held at their closed-form maximiser).
+    Observations,
+}
+
+/// [`q_hat`] restricted to `terms`.
+pub(crate) fn q_hat_terms<G: GradientModel>(
+    model: &G,
+    theta: &[f64],
+    paths: &Trajectories,
+    data: &Series,
+    grad: Option<&mut [f64]>,
+    terms: Terms,
+) -> Result<f64, GradientEmError> {
     let d = model.parameter_dim();
     if theta.len() != d || grad.as_ref().is_some_and(|g| g.len() != d) {
         return Err(GradientEmError::InvalidParams(format!(
@@ -40,11 +61,13 @@ pub fn q_hat<G: GradientModel>(
         )));
     }
     Ok(match (grad, model.gradients()) {
-        (None, _) => sum_terms(model, theta, paths, data, None),
-        (Some(grad), Gradients::Analytic) => sum_terms(model, theta, paths, data, Some(grad)),
-        (Some(grad), Gradients::FiniteDifferences) => {
-            central_difference(theta, grad, |th| sum_terms(model, th, paths, data, None))
+        (None, _) => sum_terms(model, theta, paths, data, None, terms),
+        (Some(grad), Gradients::Analytic) => {
+            sum_terms(model, theta, paths, data, Some(grad), terms)
         }
+        (Some(grad), Gradients::FiniteDifferences) => central_difference(theta, grad, |th| {
+            sum_terms(model, th, paths, data, None, terms)
+        }),
     })
 }
 
@@ -54,20 +77,26 @@ fn sum_terms<G: GradientModel>(
     paths: &Trajectories,
     data: &Series,
     grad: Option<&mut [f64]>,
+    terms: Terms,
 ) -> f64 {
+    let dynamics = terms == Terms::All;
     let p = model.unpack(theta);
     let (k, steps, n) = (paths.paths(), paths.steps(), paths.state_dim());
     let total = match grad {
         None => {
-            let mut total: f64 = paths
-                .states(0)
-                .chunks_exact(n)
-                .map(|x| model.log_initial(&p, x))
-                .sum();
+            let mut total: f64 = if dynamics {
+                paths
+                    .states(0)
+                    .chunks_exact(n)
+                    .map(|x| model.log_initial(&p, x))
+                    .sum()
+            } else {
+                0.0
+            };
             for t in 0..steps {
                 let (u, y) = (data.input(t), data.output(t));
                 let states = paths.states(t);
-                if t + 1 < steps {
+                if dynamics && t + 1 < steps {
                     for (x, next) in states
                         .chunks_exact(n)
                         .zip(paths.states(t + 1).chunks_exact(n))
@@ -86,13 +115,15 @@ fn sum_terms<G: GradientModel>(
         Some(grad) => {
             grad.fill(0.0);
             let mut total = 0.0;
-            for x in paths.states(0).chunks_exact(n) {
-                total += model.log_initial_gradient(&p, x, grad);
+            if dynamics {
+                for x in paths.states(0).chunks_exact(n) {
+                    total += model.log_initial_gradient(&p, x, grad);
+                }
             }
             for t in 0..steps {
                 let (u, y) = (data.input(t), data.output(t));
                 let states = paths.states(t);
-                if t + 1 < steps {
+                if dynamics && t + 1 < steps {
                     for (x, next) in states
                         .chunks_exact(n)
                         .zip(paths.states(t + 1).chunks_exact(n))

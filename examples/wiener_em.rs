@@ -3,8 +3,9 @@
 //! Usage: `cargo run --release --example wiener_em [seed] [iterations] [bfgs iterations]`.
 //! Diagnostics of the start: `WIENER_START=truth` (start at the true system),
 //! `WIENER_BETA=truth` (true breakpoints, the rest as the lecture), `WIENER_R0=v` (both
-//! noise variances start at v). Prints the filter's log-likelihood at the start with
-//! M = 100 and M = 10 000.
+//! noise variances start at v), `WIENER_PARTICLES=m` (the E-step's filter particles,
+//! default 100; the smoother draws 100 paths). Prints the filter's log-likelihood at
+//! the start with M = 100 and M = 10 000.
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
 use sysid::em::{EmOptions, run_em};
 use sysid::models::{
@@ -52,11 +53,9 @@ fn main() {
         }
         start
     };
-    {
+    let filter_logliks = |label: &str, theta: &[f64]| {
         use sysid::smc::{FilterOptions, ParticleFilter};
-        let smc = WienerModel::default()
-            .smc_model(&start.theta().expect("start"))
-            .expect("model");
+        let smc = WienerModel::default().smc_model(theta).expect("model");
         for m in [100, 10_000] {
             let mut pf = ParticleFilter::new(FilterOptions {
                 particles: m,
@@ -66,9 +65,10 @@ fn main() {
             let l: Vec<f64> = (0..3)
                 .map(|r| pf.run(&smc, &data, r).expect("pf").loglik)
                 .collect();
-            println!("filter log-likelihood at the start, M = {m}: {l:?}");
+            println!("filter log-likelihood at the {label}, M = {m}: {l:?}");
         }
-    }
+    };
+    filter_logliks("start", &start.theta().expect("start"));
     let model = WienerModel::default();
     let smoother = FfbsiReject {
         paths: 100,
@@ -79,7 +79,11 @@ fn main() {
         max_iterations: bfgs,
         ..MStepOptions::default()
     };
-    let mut em = GradientEm::new(&model, data, 100, smoother, m_step, seed).expect("options");
+    let particles = std::env::var("WIENER_PARTICLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(100);
+    let mut em = GradientEm::new(&model, data, particles, smoother, m_step, seed).expect("options");
     let options = EmOptions {
         max_iterations: iterations,
         tol: 0.0,
@@ -93,6 +97,7 @@ fn main() {
         println!("last M-step: {} evaluations, {}", m.evaluations, m.status);
     }
     let seconds = t.elapsed().as_secs_f64();
+    filter_logliks("estimate", &fit.estimate);
     let estimate = WienerEstimate::from_theta(&fit.estimate);
     println!(
         "{:?} after {} iterations in {seconds:.1} s",

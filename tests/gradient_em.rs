@@ -403,3 +403,73 @@ fn wiener_closed_form_dynamics_step_is_the_maximiser_bfgs_finds() {
         bfgs.q_after
     );
 }
+
+#[test]
+fn wiener_sorted_observation_sum_equals_the_term_by_term_sum() {
+    use rand::RngExt;
+    use sysid::models::{BlindWiener, WienerEstimate, WienerModel};
+    let (steps, k) = (150, 5);
+    let sim = BlindWiener::simulate(steps, 8);
+    let mut outputs = sim.outputs.clone();
+    // some missing outputs, one of each kind and one whole step
+    outputs[2 * 10] = f64::NAN;
+    outputs[2 * 20 + 1] = f64::NAN;
+    outputs[2 * 30] = f64::NAN;
+    outputs[2 * 30 + 1] = f64::NAN;
+    let data = Series::new(&outputs, 2).unwrap();
+    let mut rng = sysid::smc::stream(12, 0);
+    let mut states = Vec::new();
+    for t in 0..steps {
+        for _ in 0..k {
+            states.push(sim.z[t] + rng.random::<f64>() - 0.5);
+            states.push(rng.random::<f64>());
+        }
+    }
+    let tie = states[2 * 7]; // a state's z exactly at a breakpoint
+    let paths = Trajectories::from_states(steps, k, 2, states).unwrap();
+    let model = WienerModel::default();
+    let direct = |theta: &[f64]| {
+        let p = model.unpack(theta);
+        let mut total = 0.0;
+        for t in 0..steps {
+            for x in paths.states(t).chunks_exact(2) {
+                total += model.log_observation(&p, t, x, &[], data.output(t));
+            }
+        }
+        total / k as f64
+    };
+    let prepared = model.prepare_observations(&paths, &data).expect("prepared");
+    for beta in [
+        [-2.0, 3.0, -1.5, 1.0],
+        [-0.2, 0.3, -0.15, 0.1],
+        [tie, tie + 1.0, tie - 1.0, tie],
+        [-40.0, 50.0, 30.0, 60.0],
+    ] {
+        let theta = WienerEstimate {
+            a: [[0.5, 0.1], [-0.3, 0.2]],
+            q: [[2.0, -0.5], [-0.5, 1.0]],
+            beta,
+            r: [0.05, 0.2],
+        }
+        .theta()
+        .unwrap();
+        let mut grad = vec![0.0; 13];
+        let value = prepared.value_and_gradient(&theta, &mut grad);
+        let expected = direct(&theta);
+        assert!(
+            (value - expected).abs() < 1e-10 * expected.abs(),
+            "beta {beta:?}: {value} vs {expected}"
+        );
+        let mut full = vec![0.0; 13];
+        q_hat(&model, &theta, &paths, &data, Some(&mut full)).unwrap();
+        assert!(grad[..7].iter().all(|&g| g == 0.0));
+        for i in 7..13 {
+            assert!(
+                (grad[i] - full[i]).abs() < 1e-9 * full[i].abs().max(1.0),
+                "beta {beta:?}, entry {i}: {} vs {}",
+                grad[i],
+                full[i]
+            );
+        }
+    }
+}

@@ -18,6 +18,7 @@ mod linear_smc;
 mod nlbench;
 pub mod nlbench_study;
 mod wiener;
+mod wiener_observations;
 
 pub use affine::{LinearAffine, NlbenchAffine};
 pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};

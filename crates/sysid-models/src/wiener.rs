@@ -1,11 +1,12 @@
 //! The blind Wiener system of seed 001 (ALGORITHMS.md 4) and its estimation model for
 //! gradient EM.
 
+use crate::wiener_observations::SortedObservations;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-use sysid_em::gradient::{GradientEmError, GradientModel, Gradients};
+use sysid_em::gradient::{GradientEmError, GradientModel, Gradients, ObservationSum};
 use sysid_smc::{
-    InitialSampler, ObservationDensity, StateSpace, Trajectories, TransitionBound,
+    InitialSampler, ObservationDensity, Series, StateSpace, Trajectories, TransitionBound,
     TransitionDensity, TransitionSampler, stream,
 };
 
@@ -239,21 +240,21 @@ pub struct Unpacked {
     l11: f64,
     l21: f64,
     l22: f64,
-    gap_sat: f64,
-    gap_dead: f64,
-    beta: [f64; 4],
+    pub(crate) gap_sat: f64,
+    pub(crate) gap_dead: f64,
+    pub(crate) beta: [f64; 4],
     r: [f64; 2],
     /// `-ln(2 pi) - ln L11 - ln L22`
     transition_norm: f64,
     /// `-0.5 ln(2 pi r_i)`
-    observation_norm: [f64; 2],
+    pub(crate) observation_norm: [f64; 2],
     inv_l11: f64,
     inv_l22: f64,
-    inv_r: [f64; 2],
+    pub(crate) inv_r: [f64; 2],
 }
 
 impl Unpacked {
-    fn new(theta: &[f64]) -> Self {
+    pub(crate) fn new(theta: &[f64]) -> Self {
         let (gap_sat, gap_dead) = (theta[8].exp(), theta[10].exp());
         Unpacked {
             a: [[theta[0], theta[1]], [theta[2], theta[3]]],
@@ -395,6 +396,16 @@ impl GradientModel for WienerModel {
         }
         theta[..7].copy_from_slice(&dynamics);
         Some((0..7).collect())
+    }
+
+    /// The states' `z` sorted once per output, with prefix sums: an evaluation of `I3`
+    /// costs four binary searches (module `wiener_observations`).
+    fn prepare_observations<'a>(
+        &self,
+        paths: &'a Trajectories,
+        data: &'a Series<'a>,
+    ) -> Option<Box<dyn ObservationSum + 'a>> {
+        Some(Box::new(SortedObservations::new(paths, data)))
     }
 
     fn log_initial(&self, _p: &Unpacked, x: &[f64]) -> f64 {

@@ -22,7 +22,9 @@
 //! sets the dynamics by least squares on the fixed trajectories and runs BFGS on `I3`
 //! over the remaining parameters only. On fixed trajectories `I1 + I2` and `I3`
 //! depend on disjoint parameters, so this reaches the same maximiser as BFGS over
-//! everything, exactly in the dynamics and with fewer and cheaper evaluations.
+//! everything, exactly in the dynamics and with fewer and cheaper evaluations. A
+//! model can also prepare `I3` once per M-step
+//! ([`GradientModel::prepare_observations`]; the Wiener model sorts the states).
 //! Iteration `k` draws from the random
 //! streams `(seed, 2k)` (filter) and `(seed, 2k + 1)` (smoother). The trace value is the
 //! filter's log-likelihood estimate at `theta_k`; the E-step is noisy, so the runner
@@ -41,7 +43,7 @@ mod model;
 mod mstep;
 mod objective;
 
-pub use model::{GradientModel, Gradients, central_difference};
+pub use model::{GradientModel, Gradients, ObservationSum, central_difference};
 pub use mstep::{MStepOptions, MStepOutcome, m_step};
 pub use objective::q_hat;
 

@@ -2,7 +2,7 @@
 //! and, optionally, their gradients.
 
 use super::GradientEmError;
-use sysid_smc::{FilterModel, Trajectories, TransitionDensity};
+use sysid_smc::{FilterModel, Series, Trajectories, TransitionDensity};
 
 /// How the gradient of `Q^` is obtained.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -67,6 +67,20 @@ pub trait GradientModel: Sync {
         None
     }
 
+    /// An evaluator of `I3` on fixed trajectories, prepared once per M-step, for the
+    /// BFGS that follows [`maximise_dynamics`](Self::maximise_dynamics) (for example
+    /// from the states sorted once, so that an evaluation costs a few binary searches
+    /// instead of a pass over every path and step). `None`, the default: the generic
+    /// sum of [`log_observation_gradient`](Self::log_observation_gradient) terms.
+    fn prepare_observations<'a>(
+        &self,
+        paths: &'a Trajectories,
+        data: &'a Series<'a>,
+    ) -> Option<Box<dyn ObservationSum + 'a>> {
+        let _ = (paths, data);
+        None
+    }
+
     /// `log mu_theta(x_0)`.
     fn log_initial(&self, p: &Self::Params, x: &[f64]) -> f64;
     /// `log f_theta(next | x, u_t, t)`.
@@ -108,6 +122,13 @@ pub trait GradientModel: Sync {
         let _ = grad;
         self.log_observation(p, t, x, u, y)
     }
+}
+
+/// `I3(theta) = (1/K) sum_k sum_t log g_theta(y_t | x_t^k)` on the trajectories it was
+/// prepared from ([`GradientModel::prepare_observations`]).
+pub trait ObservationSum {
+    /// `I3(theta)`, adding its gradient into `grad` (all of `theta`'s entries).
+    fn value_and_gradient(&self, theta: &[f64], grad: &mut [f64]) -> f64;
 }
 
 /// `f(theta)`, writing the central-difference gradient of `f` into `grad` (step

@@ -8,7 +8,7 @@ use argmin::solver::quasinewton::BFGS;
 use sysid_smc::{Series, Trajectories};
 
 use super::objective::{Terms, q_hat_terms};
-use super::{GradientEmError, GradientModel, q_hat};
+use super::{GradientEmError, GradientModel, ObservationSum, q_hat};
 
 /// Settings of the BFGS M-step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,6 +65,8 @@ struct NegativeQ<'a, G> {
     scale: f64,
     base: Vec<f64>,
     free: Option<Vec<usize>>,
+    /// The model's prepared `I3`, used when `free` is set.
+    observations: Option<Box<dyn ObservationSum + 'a>>,
     cache: RefCell<Option<Evaluation>>,
     evaluations: RefCell<usize>,
 }
@@ -101,15 +103,20 @@ impl<G: GradientModel> NegativeQ<'_, G> {
             Some(_) => Terms::Observations,
         };
         let mut full_grad = vec![0.0; theta.len()];
-        let q = q_hat_terms(
-            self.model,
-            &theta,
-            self.paths,
-            self.data,
-            Some(&mut full_grad),
-            terms,
-        )
-        .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
+        let q = match &self.observations {
+            Some(observations) if terms == Terms::Observations => {
+                observations.value_and_gradient(&theta, &mut full_grad)
+            }
+            _ => q_hat_terms(
+                self.model,
+                &theta,
+                self.paths,
+                self.data,
+                Some(&mut full_grad),
+                terms,
+            )
+            .map_err(|e| argmin::core::Error::msg(e.to_string()))?,
+        };
         *self.evaluations.borrow_mut() += 1;
         if !q.is_finite() || full_grad.iter().any(|g| !g.is_finite()) {
             return Err(argmin::core::Error::msg(format!(
@@ -192,6 +199,9 @@ pub fn m_step<G: GradientModel>(
         data,
         scale: 1.0 / data.steps() as f64,
         base: base.clone(),
+        observations: free
+            .as_ref()
+            .and_then(|_| model.prepare_observations(paths, data)),
         free,
         cache: RefCell::new(None),
         evaluations: RefCell::new(0),

@@ -378,6 +378,7 @@ fn wiener_closed_form_dynamics_step_is_the_maximiser_bfgs_finds() {
     let options = MStepOptions {
         max_iterations: 1000,
         tol_grad: 1e-10,
+        ..MStepOptions::default()
     };
     let all_by_bfgs = Plain {
         inner: model,
@@ -472,4 +473,102 @@ fn wiener_sorted_observation_sum_equals_the_term_by_term_sum() {
             );
         }
     }
+}
+
+#[test]
+fn wiener_exact_breakpoints_beat_a_grid_local_moves_and_bfgs() {
+    use rand::RngExt;
+    use sysid::models::{BlindWiener, WienerEstimate, WienerModel, dead_zone, saturation};
+    let (steps, k) = (300, 4);
+    let sim = BlindWiener::simulate(steps, 9);
+    let data = Series::new(&sim.outputs, 2).unwrap();
+    let mut rng = sysid::smc::stream(13, 0);
+    let mut states = Vec::new();
+    for t in 0..steps {
+        for _ in 0..k {
+            states.push(sim.z[t] + 0.4 * (rng.random::<f64>() - 0.5));
+            states.push(rng.random::<f64>());
+        }
+    }
+    let paths = Trajectories::from_states(steps, k, 2, states).unwrap();
+    let model = WienerModel::default();
+    // the residual sums of squares of both outputs, term by term
+    let rss = |beta: [f64; 4]| {
+        let mut total = [0.0; 2];
+        for t in 0..steps {
+            let y = data.output(t);
+            for x in paths.states(t).chunks_exact(2) {
+                total[0] += (y[0] - saturation(x[0], beta[0], beta[1])).powi(2);
+                total[1] += (y[1] - dead_zone(x[0], beta[2], beta[3])).powi(2);
+            }
+        }
+        total
+    };
+    let start = WienerEstimate {
+        a: [[1.0, -0.9], [1.0, 0.0]],
+        q: [[1.0, 0.0], [0.0, 0.01]],
+        beta: [-0.2, 0.3, -0.15, 0.1],
+        r: [0.1, 0.1],
+    }
+    .theta()
+    .unwrap();
+    let prepared = model.prepare_observations(&paths, &data).unwrap();
+    let mut exact = start.clone();
+    assert!(prepared.maximise(&mut exact));
+    assert_eq!(exact[..7], start[..7]);
+    let found = WienerEstimate::from_theta(&exact);
+    let best = rss(found.beta);
+    let n = (steps * k) as f64;
+    for (r, rss) in found.r.iter().zip(best) {
+        assert!((r - rss / n).abs() < 1e-9 * r, "r {r} vs RSS/n {}", rss / n);
+    }
+    // no grid point and no small move of a breakpoint does better, output by output
+    let grid = |lo: f64, hi: f64| (0..=40).map(move |j| lo + (hi - lo) * j as f64 / 40.0);
+    for b1 in grid(-4.0, 1.0) {
+        for b2 in grid(-1.0, 5.0).filter(|&b2| b2 > b1) {
+            let other = rss([b1, b2, found.beta[2], found.beta[3]]);
+            assert!(best[0] <= other[0] * (1.0 + 1e-12), "saturation {b1}, {b2}");
+        }
+    }
+    for b3 in grid(-4.0, 1.0) {
+        for b4 in grid(-1.0, 4.0).filter(|&b4| b4 > b3) {
+            let other = rss([found.beta[0], found.beta[1], b3, b4]);
+            assert!(best[1] <= other[1] * (1.0 + 1e-12), "dead zone {b3}, {b4}");
+        }
+    }
+    for i in 0..4 {
+        for step in [-1e-2, -1e-4, 1e-4, 1e-2] {
+            let mut moved = found.beta;
+            moved[i] += step;
+            let other = rss(moved);
+            assert!(
+                best[i / 2] <= other[i / 2] * (1.0 + 1e-12),
+                "breakpoint {i} moved by {step}"
+            );
+        }
+    }
+    // and BFGS on I3 from the same start ends no higher
+    let by_bfgs = MStepOptions {
+        exact_observations: false,
+        ..MStepOptions::default()
+    };
+    let bfgs = m_step(&model, &paths, &data, &start, &by_bfgs, None).unwrap();
+    let exact_step = m_step(
+        &model,
+        &paths,
+        &data,
+        &start,
+        &MStepOptions::default(),
+        None,
+    )
+    .unwrap();
+    assert_eq!(exact_step.evaluations, 0, "{}", exact_step.status);
+    assert_eq!(exact_step.theta[7..], exact[7..]);
+    assert!(
+        exact_step.q_after >= bfgs.q_after - 1e-9 * bfgs.q_after.abs(),
+        "exact {} vs BFGS {} ({})",
+        exact_step.q_after,
+        bfgs.q_after,
+        bfgs.status
+    );
 }

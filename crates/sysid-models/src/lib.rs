@@ -19,6 +19,7 @@ mod nlbench;
 pub mod nlbench_study;
 mod wiener;
 mod wiener_observations;
+mod wiener_start;
 
 pub use affine::{LinearAffine, NlbenchAffine};
 pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};
@@ -28,8 +29,8 @@ pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
 pub use wiener::{
     BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone,
     normalised_magnitude_error, saturation, spectral_magnitude, wiener_frequency_grid,
-    wiener_start,
 };
+pub use wiener_start::wiener_start;
 
 use nalgebra::{DMatrix, dmatrix};
 use rand::SeedableRng;

@@ -102,6 +102,20 @@ impl BlindWiener {
 /// magnitude of the linear part seen through its process noise (the input's gain for
 /// `Q = B B'`).
 pub fn spectral_magnitude(a: &[[f64; 2]; 2], q: &[[f64; 2]; 2], c: &[f64; 2], omega: f64) -> f64 {
+    let v = output_row(a, c, omega);
+    // v Q v^H (real, >= 0)
+    let mut total = 0.0;
+    for i in 0..2 {
+        for j in 0..2 {
+            // Re(v_i q_ij conj(v_j))
+            total += q[i][j] * (v[i].0 * v[j].0 + v[i].1 * v[j].1);
+        }
+    }
+    total.max(0.0).sqrt()
+}
+
+/// `v = C (e^{iw} I - A)^{-1}` for a 2-state system, as `(re, im)` pairs.
+pub(crate) fn output_row(a: &[[f64; 2]; 2], c: &[f64; 2], omega: f64) -> [(f64, f64); 2] {
     // M = e^{iw} I - A = [[m00, m01], [m10, m11]] (complex); v = C M^{-1}
     let (cw, sw) = (omega.cos(), omega.sin());
     let m = [
@@ -118,24 +132,13 @@ pub fn spectral_magnitude(a: &[[f64; 2]; 2], q: &[[f64; 2]; 2], c: &[f64; 2], om
         [m[1][1], (-m[0][1].0, -m[0][1].1)],
         [(-m[1][0].0, -m[1][0].1), m[0][0]],
     ];
-    let v: Vec<(f64, f64)> = (0..2)
-        .map(|j| {
-            let s = (
-                c[0] * adj[0][j].0 + c[1] * adj[1][j].0,
-                c[0] * adj[0][j].1 + c[1] * adj[1][j].1,
-            );
-            mul(s, inv_det)
-        })
-        .collect();
-    // v Q v^H (real, >= 0)
-    let mut total = 0.0;
-    for i in 0..2 {
-        for j in 0..2 {
-            // Re(v_i q_ij conj(v_j))
-            total += q[i][j] * (v[i].0 * v[j].0 + v[i].1 * v[j].1);
-        }
-    }
-    total.max(0.0).sqrt()
+    [0, 1].map(|j| {
+        let s = (
+            c[0] * adj[0][j].0 + c[1] * adj[1][j].0,
+            c[0] * adj[0][j].1 + c[1] * adj[1][j].1,
+        );
+        mul(s, inv_det)
+    })
 }
 
 /// The estimation model of blind Wiener identification, for gradient EM.
@@ -572,48 +575,6 @@ impl TransitionBound for WienerSmc {
     fn log_transition_bound(&self, _t: usize, _u: &[f64]) -> f64 {
         self.p.transition_norm
     }
-}
-
-/// The lecture's starting point from outputs `y` (time-major `T x 2`): the linear part
-/// from N4SID (order 2, no inputs) on `y1` alone, put in the basis where `C = [1, 0]`;
-/// `r1 = r2 = 0.1`; each breakpoint at a tenth of its true value.
-///
-/// N4SID's `Q` is made positive definite if needed by adding `1e-6 trace(Q) I`.
-pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
-    use nalgebra::DMatrix;
-    use sysid_subspace::{N4sidOptions, Order, n4sid};
-    let steps = outputs.len() / 2;
-    let y1 = DMatrix::from_iterator(1, steps, outputs.iter().step_by(2).copied());
-    let record = sysid_kalman::Record::new(DMatrix::zeros(0, steps), y1);
-    let fit = n4sid(
-        &record,
-        &N4sidOptions {
-            order: Order::Fixed(2),
-            block_rows: None,
-        },
-    )
-    .map_err(|e| format!("N4SID on y1: {e}"))?;
-    let (a, c, q) = (fit.model.a(), fit.model.c(), fit.model.q());
-    let t = if c[(0, 0)].abs() >= 1e-3 * c[(0, 1)].abs() {
-        DMatrix::from_row_slice(2, 2, &[c[(0, 0)], c[(0, 1)], 0.0, 1.0])
-    } else {
-        DMatrix::from_row_slice(2, 2, &[c[(0, 0)], c[(0, 1)], 1.0, 0.0])
-    };
-    let t_inv = t.clone().try_inverse().ok_or("N4SID gave C = 0 on y1")?;
-    let a2 = &t * a * &t_inv;
-    let mut q2 = &t * q * t.transpose();
-    q2 = (&q2 + q2.transpose()) * 0.5;
-    if q2.clone().cholesky().is_none() {
-        let jitter = 1e-6 * q2.trace().abs().max(1e-12);
-        q2 += DMatrix::identity(2, 2) * jitter;
-    }
-    let b = BlindWiener::BETA;
-    Ok(WienerEstimate {
-        a: [[a2[(0, 0)], a2[(0, 1)]], [a2[(1, 0)], a2[(1, 1)]]],
-        q: [[q2[(0, 0)], q2[(0, 1)]], [q2[(1, 0)], q2[(1, 1)]]],
-        beta: [b[0] / 10.0, b[1] / 10.0, b[2] / 10.0, b[3] / 10.0],
-        r: [0.1, 0.1],
-    })
 }
 
 /// The frequency grid of the Wiener magnitude comparisons: `pi k / 64`, `k = 1..64`.

@@ -24,7 +24,9 @@
 //! depend on disjoint parameters, so this reaches the same maximiser as BFGS over
 //! everything, exactly in the dynamics and with fewer and cheaper evaluations. A
 //! model can also prepare `I3` once per M-step
-//! ([`GradientModel::prepare_observations`]; the Wiener model sorts the states).
+//! ([`GradientModel::prepare_observations`]; the Wiener model sorts the states), and
+//! give `I3`'s exact maximiser (`ObservationSum::maximise`): then the M-step is exact
+//! and needs no BFGS (`MStepOptions::exact_observations`).
 //! Iteration `k` draws from the random
 //! streams `(seed, 2k)` (filter) and `(seed, 2k + 1)` (smoother). The trace value is the
 //! filter's log-likelihood estimate at `theta_k`; the E-step is noisy, so the runner
@@ -82,6 +84,8 @@ pub struct GradientEm<'a, G, S> {
     pass: ParticlePass,
     options: MStepOptions,
     last: Option<MStepOutcome>,
+    hold_dynamics_for: usize,
+    steps_done: usize,
 }
 
 impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {
@@ -102,7 +106,19 @@ impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {
             pass: ParticlePass::new(particles, seed)?,
             options,
             last: None,
+            hold_dynamics_for: 0,
+            steps_done: 0,
         })
+    }
+
+    /// Holds the dynamics at their starting values for the first `iterations`
+    /// M-steps (see [`MStepOptions::hold_dynamics`]), so that a poor first E-step
+    /// (the observation model far off) does not drag a good linear start (N4SID's)
+    /// along; later M-steps update everything. Each held M-step is still a
+    /// generalised EM step (`Q^` does not decrease).
+    pub fn hold_dynamics_for(mut self, iterations: usize) -> Self {
+        self.hold_dynamics_for = iterations;
+        self
     }
 
     /// What the last M-step did.
@@ -130,7 +146,12 @@ impl<G: GradientModel, S: Smoother<G::Smc>> EmAlgorithm for GradientEm<'_, G, S>
             self.smoother
                 .trajectories(&smc, pass.history, &self.data, pass.smoother_seed)?;
         let warm = self.last.as_mut().and_then(|m| m.inverse_hessian.take());
-        let outcome = m_step(self.model, &paths, &self.data, current, &self.options, warm)?;
+        let options = MStepOptions {
+            hold_dynamics: self.options.hold_dynamics || self.steps_done < self.hold_dynamics_for,
+            ..self.options
+        };
+        self.steps_done += 1;
+        let outcome = m_step(self.model, &paths, &self.data, current, &options, warm)?;
         let next = outcome.theta.clone();
         self.last = Some(outcome);
         Ok((next, loglik))

@@ -129,6 +129,14 @@ pub trait GradientModel: Sync {
 pub trait ObservationSum {
     /// `I3(theta)`, adding its gradient into `grad` (all of `theta`'s entries).
     fn value_and_gradient(&self, theta: &[f64], grad: &mut [f64]) -> f64;
+
+    /// Sets `theta`'s observation entries to the exact maximiser of `I3`, where it has
+    /// one, and says whether it did (then the M-step needs no BFGS). Default: `false`,
+    /// `theta` untouched.
+    fn maximise(&self, theta: &mut [f64]) -> bool {
+        let _ = theta;
+        false
+    }
 }
 
 /// `f(theta)`, writing the central-difference gradient of `f` into `grad` (step

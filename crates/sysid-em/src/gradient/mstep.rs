@@ -17,6 +17,13 @@ pub struct MStepOptions {
     pub max_iterations: u64,
     /// Stop when the gradient norm of `-Q^ / T` falls below this. Default 1e-8.
     pub tol_grad: f64,
+    /// Hold the dynamics' entries (those [`GradientModel::maximise_dynamics`] sets) at
+    /// their current values and run BFGS over the rest only. No effect for a model
+    /// without a closed-form dynamics step. Default false.
+    pub hold_dynamics: bool,
+    /// After the closed-form dynamics step, use the model's exact maximiser of `I3`
+    /// where it has one ([`ObservationSum::maximise`]) instead of BFGS. Default true.
+    pub exact_observations: bool,
 }
 
 impl Default for MStepOptions {
@@ -24,6 +31,8 @@ impl Default for MStepOptions {
         MStepOptions {
             max_iterations: 50,
             tol_grad: 1e-8,
+            hold_dynamics: false,
+            exact_observations: true,
         }
     }
 }
@@ -163,7 +172,8 @@ impl<G: GradientModel> Gradient for NegativeQ<'_, G> {
 ///
 /// When the model has a closed-form dynamics step
 /// ([`GradientModel::maximise_dynamics`]), the dynamics' entries are set to it first
-/// and BFGS maximises `I3` over the other entries only.
+/// (or held, with [`MStepOptions::hold_dynamics`]) and BFGS maximises `I3` over the
+/// other entries only.
 ///
 /// The result never has a smaller `Q^` than `start`: if BFGS fails (a non-finite
 /// value at a trial point) or ends lower, the best point it visited is kept, or the
@@ -183,29 +193,81 @@ pub fn m_step<G: GradientModel>(
         });
     }
     let mut base = start.to_vec();
-    let free = model.maximise_dynamics(paths, &mut base).map(|held| {
+    let held = model.maximise_dynamics(paths, &mut base);
+    if options.hold_dynamics {
+        base.copy_from_slice(start);
+    }
+    let free = held.map(|held| {
         (0..start.len())
             .filter(|i| !held.contains(i))
             .collect::<Vec<_>>()
     });
-    let first_point: Vec<f64> = match &free {
+    let observations = free
+        .as_ref()
+        .and_then(|_| model.prepare_observations(paths, data));
+    let exact =
+        options.exact_observations && observations.as_ref().is_some_and(|o| o.maximise(&mut base));
+    let bfgs = if exact {
+        Bfgs {
+            candidate: None,
+            status: "closed form".into(),
+            evaluations: 0,
+            inverse_hessian,
+        }
+    } else {
+        let problem = NegativeQ {
+            model,
+            paths,
+            data,
+            scale: 1.0 / data.steps() as f64,
+            base: base.clone(),
+            observations,
+            free,
+            cache: RefCell::new(None),
+            evaluations: RefCell::new(0),
+        };
+        run_bfgs(problem, start, options, inverse_hessian)?
+    };
+    let mut outcome = MStepOutcome {
+        theta: start.to_vec(),
+        q_before,
+        q_after: q_before,
+        evaluations: bfgs.evaluations,
+        status: bfgs.status,
+        inverse_hessian: bfgs.inverse_hessian,
+    };
+    for theta in bfgs.candidate.into_iter().chain(std::iter::once(base)) {
+        let q = q_hat(model, &theta, paths, data, None)?;
+        if q.is_finite() && q >= q_before {
+            outcome.theta = theta;
+            outcome.q_after = q;
+            break;
+        }
+    }
+    Ok(outcome)
+}
+
+/// What BFGS returned: its best point (full parameters), why it stopped, how many
+/// evaluations it made, its final inverse Hessian.
+struct Bfgs {
+    candidate: Option<Vec<f64>>,
+    status: String,
+    evaluations: usize,
+    inverse_hessian: Option<Vec<Vec<f64>>>,
+}
+
+/// BFGS on `problem` from its free entries of `start` (all of them without `free`).
+fn run_bfgs<G: GradientModel>(
+    problem: NegativeQ<'_, G>,
+    start: &[f64],
+    options: &MStepOptions,
+    inverse_hessian: Option<Vec<Vec<f64>>>,
+) -> Result<Bfgs, GradientEmError> {
+    let first_point: Vec<f64> = match &problem.free {
         None => start.to_vec(),
-        Some(free) => free.iter().map(|&i| base[i]).collect(),
+        Some(free) => free.iter().map(|&i| problem.base[i]).collect(),
     };
     let d = first_point.len();
-    let problem = NegativeQ {
-        model,
-        paths,
-        data,
-        scale: 1.0 / data.steps() as f64,
-        base: base.clone(),
-        observations: free
-            .as_ref()
-            .and_then(|_| model.prepare_observations(paths, data)),
-        free,
-        cache: RefCell::new(None),
-        evaluations: RefCell::new(0),
-    };
     let linesearch = MoreThuenteLineSearch::new();
     let solver = BFGS::new(linesearch)
         .with_tolerance_grad(options.tol_grad)
@@ -228,33 +290,25 @@ pub fn m_step<G: GradientModel>(
                 .max_iters(options.max_iterations)
         })
         .run();
-    let (candidate, status, evaluations, final_inverse) = match result {
+    Ok(match result {
         Ok(mut r) => {
-            let status = r.state.get_termination_status().to_string();
             let problem = r.problem.problem.take();
-            let evaluations = problem.as_ref().map_or(0, |p| *p.evaluations.borrow());
-            let inverse = r.state.take_inv_hessian();
-            let best = r.state.take_best_param();
-            let candidate = best.zip(problem).map(|(point, p)| p.full(&point));
-            (candidate, status, evaluations, inverse)
+            Bfgs {
+                status: r.state.get_termination_status().to_string(),
+                evaluations: problem.as_ref().map_or(0, |p| *p.evaluations.borrow()),
+                inverse_hessian: r.state.take_inv_hessian(),
+                candidate: r
+                    .state
+                    .take_best_param()
+                    .zip(problem)
+                    .map(|(point, p)| p.full(&point)),
+            }
         }
-        Err(e) => (None, format!("error: {e}"), 0, None),
-    };
-    let mut outcome = MStepOutcome {
-        theta: start.to_vec(),
-        q_before,
-        q_after: q_before,
-        evaluations,
-        status,
-        inverse_hessian: final_inverse,
-    };
-    for theta in candidate.into_iter().chain(std::iter::once(base)) {
-        let q = q_hat(model, &theta, paths, data, None)?;
-        if q.is_finite() && q >= q_before {
-            outcome.theta = theta;
-            outcome.q_after = q;
-            break;
-        }
-    }
-    Ok(outcome)
+        Err(e) => Bfgs {
+            candidate: None,
+            status: format!("error: {e}"),
+            evaluations: 0,
+            inverse_hessian: None,
+        },
+    })
 }

@@ -52,9 +52,9 @@ pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
     let t_inv = t.clone().try_inverse().ok_or("N4SID gave C = 0 on y1")?;
     let a2 = &t * a * &t_inv;
     let a2 = [[a2[(0, 0)], a2[(0, 1)]], [a2[(1, 0)], a2[(1, 1)]]];
+    let a1 = [[a[(0, 0)], a[(0, 1)]], [a[(1, 0)], a[(1, 1)]]];
     let n4sid_spectrum = |omega: f64| {
-        let a = [[a[(0, 0)], a[(0, 1)]], [a[(1, 0)], a[(1, 1)]]];
-        let v = output_row(&a, &[c[(0, 0)], c[(0, 1)]], omega);
+        let v = output_row(&a1, &[c[(0, 0)], c[(0, 1)]], omega);
         let mut total = model.r()[(0, 0)];
         for i in 0..2 {
             total += 2.0 * v[i].0 * model.s()[(i, 0)];

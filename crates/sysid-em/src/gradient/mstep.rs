@@ -74,7 +74,7 @@ struct NegativeQ<'a, G> {
     scale: f64,
     base: Vec<f64>,
     free: Option<Vec<usize>>,
-    /// The model's prepared `I3`, used when `free` is set.
+    /// The model's prepared `I3` (only with `free`), instead of the term-by-term sum.
     observations: Option<Box<dyn ObservationSum + 'a>>,
     cache: RefCell<Option<Evaluation>>,
     evaluations: RefCell<usize>,
@@ -113,10 +113,8 @@ impl<G: GradientModel> NegativeQ<'_, G> {
         };
         let mut full_grad = vec![0.0; theta.len()];
         let q = match &self.observations {
-            Some(observations) if terms == Terms::Observations => {
-                observations.value_and_gradient(&theta, &mut full_grad)
-            }
-            _ => q_hat_terms(
+            Some(observations) => observations.value_and_gradient(&theta, &mut full_grad),
+            None => q_hat_terms(
                 self.model,
                 &theta,
                 self.paths,
@@ -192,9 +190,11 @@ pub fn m_step<G: GradientModel>(
             theta: start.to_vec(),
         });
     }
+    // BFGS starts from `base`: the closed-form dynamics (or the held ones) with the
+    // rest of `start`
     let mut base = start.to_vec();
     let held = model.maximise_dynamics(paths, &mut base);
-    if options.hold_dynamics {
+    if options.hold_dynamics || held.is_none() {
         base.copy_from_slice(start);
     }
     let free = held.map(|held| {
@@ -226,7 +226,7 @@ pub fn m_step<G: GradientModel>(
             cache: RefCell::new(None),
             evaluations: RefCell::new(0),
         };
-        run_bfgs(problem, start, options, inverse_hessian)?
+        run_bfgs(problem, options, inverse_hessian)?
     };
     let mut outcome = MStepOutcome {
         theta: start.to_vec(),
@@ -256,15 +256,14 @@ struct Bfgs {
     inverse_hessian: Option<Vec<Vec<f64>>>,
 }
 
-/// BFGS on `problem` from its free entries of `start` (all of them without `free`).
+/// BFGS on `problem` from the free entries of its `base` (all of them without `free`).
 fn run_bfgs<G: GradientModel>(
     problem: NegativeQ<'_, G>,
-    start: &[f64],
     options: &MStepOptions,
     inverse_hessian: Option<Vec<Vec<f64>>>,
 ) -> Result<Bfgs, GradientEmError> {
     let first_point: Vec<f64> = match &problem.free {
-        None => start.to_vec(),
+        None => problem.base.clone(),
         Some(free) => free.iter().map(|&i| problem.base[i]).collect(),
     };
     let d = first_point.len();

@@ -6,7 +6,8 @@
 //! `WIENER_BETA=truth` (true breakpoints, the rest as the lecture), `WIENER_R0=v` (both
 //! noise variances start at v), `WIENER_PARTICLES=m` (the E-step's filter particles,
 //! default 100; the smoother draws 100 paths), `WIENER_HOLD=n` (hold the linear part
-//! for the first n M-steps). Prints the filter's log-likelihood at
+//! for the first n M-steps), `WIENER_FILTER=bootstrap` (the E-step's filter; default
+//! `guided`, the fully adapted one). Prints the filter's log-likelihood at
 //! the start with M = 100 and M = 10 000.
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
 use sysid::em::{EmObserver, EmOptions, IterationInfo, run_em};
@@ -21,10 +22,13 @@ struct Trace;
 
 impl EmObserver<Vec<f64>> for Trace {
     fn iteration(&mut self, info: &IterationInfo<'_, Vec<f64>>) {
-        if info.iteration <= 10 || info.iteration.is_multiple_of(10) {
+        if info.iteration <= 10
+            || info.iteration.is_multiple_of(10)
+            || std::env::var("WIENER_EVERY").is_ok()
+        {
             let e = WienerEstimate::from_theta(info.estimate);
             println!(
-                "{:4}  loglik {:10.1}  beta {:7.3} {:7.3} {:7.3} {:7.3}  r {:.4} {:.4}  magnitude error {:.3}",
+                "{:4}  loglik {:10.1}  beta {:7.3} {:7.3} {:7.3} {:7.3}  r {:.4} {:.4}  A2 {:.3} {:.3} Q {:.2e} {:.2e} {:.2e}  magnitude error {:.3}",
                 info.iteration,
                 info.loglik,
                 e.beta[0],
@@ -33,6 +37,11 @@ impl EmObserver<Vec<f64>> for Trace {
                 e.beta[3],
                 e.r[0],
                 e.r[1],
+                e.a[1][0],
+                e.a[1][1],
+                e.q[0][0],
+                e.q[0][1],
+                e.q[1][1],
                 normalised_magnitude_error(&e)
             );
         }
@@ -137,6 +146,9 @@ fn main() {
     let mut em = GradientEm::new(&model, data, particles, smoother, m_step, seed)
         .expect("options")
         .hold_dynamics_for(hold);
+    if std::env::var("WIENER_FILTER").as_deref() != Ok("bootstrap") {
+        em = em.with_guided_filter();
+    }
     let options = EmOptions {
         max_iterations: iterations,
         tol: 0.0,

@@ -4,18 +4,14 @@
 
 mod common;
 
-use sysid::kalman::{KalmanWorkspace, Record};
+use common::{assert_close_to_rts, lgss_data, mean_se};
+
+use sysid::kalman::KalmanWorkspace;
 use sysid::models::{LinearGaussianSmc, Nlbench, System, lgss};
 use sysid::smc::{
     Ffbsi, FfbsiReject, FilterOptions, Genealogy, ParticleFilter, Resampling, Series, Smoother,
     Tanizaki, Trajectories,
 };
-
-fn lgss_data(steps: usize, seed: u64) -> (Record, Vec<f64>) {
-    let sim = System::Lgss.simulate(steps, seed).unwrap();
-    let y = sim.record.y.as_slice().to_vec();
-    (sim.record, y)
-}
 
 /// A filter with `particles` particles that stores its history for the smoothers.
 fn stored_filter(particles: usize) -> ParticleFilter {
@@ -25,14 +21,6 @@ fn stored_filter(particles: usize) -> ParticleFilter {
         ..Default::default()
     })
     .unwrap()
-}
-
-/// Mean and standard error of a sample.
-fn mean_se(values: &[f64]) -> (f64, f64) {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, (var / n).sqrt())
 }
 
 #[test]
@@ -147,25 +135,6 @@ fn replicate_means<S: Smoother<LinearGaussianSmc>>(
             paths.means()
         })
         .collect()
-}
-
-fn assert_close_to_rts(name: &str, runs: &[Vec<f64>], rts: &[f64]) {
-    let mut worst: f64 = 0.0;
-    for (t, &exact) in rts.iter().enumerate() {
-        let values: Vec<f64> = runs.iter().map(|r| r[t]).collect();
-        let (mean, se) = mean_se(&values);
-        let z = (mean - exact).abs() / se;
-        worst = worst.max(z);
-        if std::env::var("SMC_DEBUG").is_ok() && z > 3.0 {
-            eprintln!("{name}: t = {t}, mean {mean}, RTS {exact}, z {z:.2}");
-            continue;
-        }
-        assert!(
-            z < 4.0,
-            "{name}: t = {t}, mean {mean}, RTS {exact}, {z:.2} standard errors"
-        );
-    }
-    assert!(worst > 0.5, "{name}: suspiciously exact ({worst})");
 }
 
 #[test]

@@ -39,6 +39,14 @@ pub struct Args {
     /// part is closed form either way.
     #[arg(long, default_value = "exact", value_parser = ["exact", "bfgs"])]
     pub m_step: String,
+    /// The E-step's filter: `guided` (fully adapted: particles drawn from
+    /// `p(x_t | x_{t-1}, y_t)`, exact for the piecewise-linear outputs) or `bootstrap`.
+    #[arg(long, default_value = "guided", value_parser = ["guided", "bootstrap"])]
+    pub filter: String,
+    /// Hold the linear part at its start (N4SID's) for the first this many M-steps,
+    /// while the breakpoints and noise variances move from the lecture's start.
+    #[arg(long, default_value_t = 0)]
+    pub hold: usize,
     /// BFGS iterations per M-step at most (with `--m-step bfgs`, or when the exact
     /// search does not apply).
     #[arg(long, default_value_t = 50)]
@@ -81,7 +89,11 @@ fn realisation(a: &Args, run: usize) -> Result<Outcome, String> {
         ..MStepOptions::default()
     };
     let mut em = GradientEm::new(&model, data, a.particles, smoother, m_step, em_seed)
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| e.to_string())?
+        .hold_dynamics_for(a.hold);
+    if a.filter == "guided" {
+        em = em.with_guided_filter();
+    }
     let options = EmOptions {
         max_iterations: a.iters,
         tol: 0.0,
@@ -181,7 +193,7 @@ pub fn run(a: &Args) -> Result<(), String> {
         .collect();
     emit(
         &json!({"task": "wiener_summary", "params": {"runs": a.runs, "T": a.steps, "M": a.particles,
-            "iterations": a.iters, "m_step": a.m_step, "bfgs_iters": a.bfgs_iters, "seed": a.seed},
+            "iterations": a.iters, "m_step": a.m_step, "filter": a.filter, "hold": a.hold, "bfgs_iters": a.bfgs_iters, "seed": a.seed},
         "breakpoint_median_abs_error_relative": numbers(&relative),
         "breakpoints_met": relative.iter().all(|&r| r <= 0.1),
         "r_median_max_abs_error": number(median(r_errors)),

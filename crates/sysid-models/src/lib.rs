@@ -17,7 +17,9 @@ mod gradient_lgss;
 mod linear_smc;
 mod nlbench;
 pub mod nlbench_study;
+mod truncated_normal;
 mod wiener;
+mod wiener_guided;
 mod wiener_observations;
 mod wiener_start;
 

@@ -10,7 +10,7 @@ use sysid_smc::{
     TransitionDensity, TransitionSampler, stream,
 };
 
-const LN_2PI: f64 = 1.837_877_066_409_345_5;
+pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// `h1`: saturation at `lo` and `hi` (`lo <= hi`; NaN propagates, never a panic).
 #[inline]
@@ -239,14 +239,14 @@ impl WienerEstimate {
 /// [`WienerModel`]'s parameters unpacked once per evaluation of `Q^`.
 #[derive(Debug, Clone, Copy)]
 pub struct Unpacked {
-    a: [[f64; 2]; 2],
-    l11: f64,
-    l21: f64,
-    l22: f64,
+    pub(crate) a: [[f64; 2]; 2],
+    pub(crate) l11: f64,
+    pub(crate) l21: f64,
+    pub(crate) l22: f64,
     pub(crate) gap_sat: f64,
     pub(crate) gap_dead: f64,
     pub(crate) beta: [f64; 4],
-    r: [f64; 2],
+    pub(crate) r: [f64; 2],
     /// `-ln(2 pi) - ln L11 - ln L22`
     transition_norm: f64,
     /// `-0.5 ln(2 pi r_i)`
@@ -401,6 +401,61 @@ impl GradientModel for WienerModel {
         Some((0..7).collect())
     }
 
+    /// The observability canonical form, with the process noise moved to the
+    /// minimum-phase side; the law of `z` (hence of the outputs) is unchanged, up to
+    /// the initial-state prior.
+    ///
+    /// 1. **Basis.** `x' = O x`, `O = [[1, 0], [a11, a12]]` (the second state is the
+    ///    noise-free prediction of the next `z`): `A' = O A O^-1` is the companion
+    ///    matrix `[[0, 1], [-det A, tr A]]` and `Q' = O Q O'`. The basis, which the
+    ///    data cannot identify, then cannot drift.
+    /// 2. **Noise.** In that form `z_{t+2} - tr z_{t+1} + det z_t` is an MA(1)
+    ///    process whose autocovariances `g0 = (1 + tr^2) Q11 + Q22 - 2 tr Q12` and
+    ///    `g1 = Q12 - tr Q11` are all the data can see. Every `Q` with the same
+    ///    `(g0, g1)` is `Q11 = s`, `Q12 = g1 + tr s`, `Q22 = g0 + 2 tr g1 + (tr^2 - 1) s`,
+    ///    positive semi-definite for `s` between the squares `s-` and `s+` of the
+    ///    MA(1) factors: `s+` is the minimum-phase (innovations) form, `s-` the
+    ///    maximum-phase one. Given `z`'s past, the second state is tracked with error
+    ///    factor `g1 / s` per step, above 1 in modulus near `s-`: there a particle
+    ///    filter loses the second state and EM stalls (measured: realisations ending
+    ///    with `Q11` near 0 and magnitude errors of 0.15-0.25). The canonical `Q` takes
+    ///    `s = s+ - MARGIN (s+ - s-)`, close to the innovations form but positive
+    ///    definite, so that the backward kernel of the smoother stays proper.
+    ///
+    /// `theta` is returned unchanged when `a12` is zero relative to `A` (the basis is
+    /// not observable); step 2 is skipped when `s+ = s-` (a spectral zero on the unit
+    /// circle).
+    fn canonical(&self, mut theta: Vec<f64>) -> Vec<f64> {
+        if theta.len() != 13 {
+            return theta;
+        }
+        let [a11, a12, a21, a22] = [theta[0], theta[1], theta[2], theta[3]];
+        let scale = a11.abs() + a12.abs() + a21.abs() + a22.abs();
+        if a12.abs().partial_cmp(&(1e-12 * scale)) != Some(std::cmp::Ordering::Greater) {
+            return theta;
+        }
+        let (l11, l21) = (theta[4].exp(), theta[5]);
+        let trace = a11 + a22;
+        // L' = O L (lower triangular; a negative a12 flips the second state)
+        let mut noise = (theta[4], a11 * l11 + a12 * l21, theta[6] + a12.abs().ln());
+        if let Some(minimum_phase) = minimum_phase_noise(trace, noise) {
+            noise = minimum_phase;
+        }
+        let canonical = [
+            0.0,
+            1.0,
+            a12 * a21 - a11 * a22,
+            trace,
+            noise.0,
+            noise.1,
+            noise.2,
+        ];
+        if canonical.iter().all(|v| v.is_finite()) {
+            theta[..7].copy_from_slice(&canonical);
+        }
+        theta
+    }
+
     /// The states' `z` sorted once per output, with prefix sums: an evaluation of `I3`
     /// costs four binary searches (module `wiener_observations`).
     fn prepare_observations<'a>(
@@ -521,11 +576,38 @@ fn solve_cholesky2((l11, l21, l22): (f64, f64, f64), b: [f64; 2]) -> [f64; 2] {
     [(w0 - l21 * v1) / l11, v1]
 }
 
+/// How far from the innovations form the canonical process noise stays, as a
+/// fraction of the range of equivalent noises (see `WienerModel::canonical`).
+const MARGIN: f64 = 0.1;
+
+/// The equivalent noise of a companion-form `A` (trace `trace`) closest to the
+/// innovations form, as `(ln L11, L21, ln L22)` from the same; `None` when the
+/// range of equivalent noises is a single point.
+fn minimum_phase_noise(
+    trace: f64,
+    (ln_l11, l21, ln_l22): (f64, f64, f64),
+) -> Option<(f64, f64, f64)> {
+    let (l11, l22) = (ln_l11.exp(), ln_l22.exp());
+    let (q11, q12, q22) = (l11 * l11, l11 * l21, l21 * l21 + l22 * l22);
+    let g0 = (1.0 + trace * trace) * q11 + q22 - 2.0 * trace * q12;
+    let g1 = q12 - trace * q11;
+    let spread = (g0 * g0 - 4.0 * g1 * g1).max(0.0).sqrt();
+    // s = s+ - MARGIN (s+ - s-)
+    let s = 0.5 * (g0 + spread) - MARGIN * spread;
+    // Q22 - Q12^2 / Q11 = (s+ - s)(s - s-) / s
+    let schur = MARGIN * (1.0 - MARGIN) * spread * spread / s;
+    if !(s > 0.0 && schur > 0.0 && schur.is_finite()) {
+        return None;
+    }
+    let l11 = s.sqrt();
+    Some((0.5 * s.ln(), (g1 + trace * s) / l11, 0.5 * schur.ln()))
+}
+
 /// [`WienerModel`] at fixed parameters, as a particle model.
 #[derive(Debug, Clone, Copy)]
 pub struct WienerSmc {
-    p: Unpacked,
-    sd_p1: f64,
+    pub(crate) p: Unpacked,
+    pub(crate) sd_p1: f64,
 }
 
 impl StateSpace for WienerSmc {
@@ -639,6 +721,48 @@ mod tests {
         // with (I - A) = [[0, 0.9], [-1, 1]]: x2 = x1, 0.9 x2 = 1 -> x = [1/0.9, 1/0.9]
         let direct = (1.0 + 0.3) / 0.9;
         assert!((BlindWiener::magnitude(0.0) - direct).abs() < 1e-12);
+    }
+
+    /// The canonical form keeps the spectrum, the nonlinearity and the noise
+    /// variances, makes `A` a companion matrix, puts the process noise on the
+    /// minimum-phase side, and is its own fixed point; a negative `a12` (a flipped
+    /// second state) too.
+    #[test]
+    fn the_canonical_basis_keeps_the_model() {
+        let model = WienerModel::default();
+        for a12 in [4.6, -0.02] {
+            let estimate = WienerEstimate {
+                a: [[0.29, a12], [-0.15 * 4.6 / a12, 0.72]],
+                q: [[0.8, 0.3], [0.3, 0.5]],
+                beta: BlindWiener::BETA,
+                r: BlindWiener::R,
+            };
+            let theta = estimate.theta().unwrap();
+            let canonical = model.canonical(theta.clone());
+            let c = WienerEstimate::from_theta(&canonical);
+            assert_eq!(c.a[0], [0.0, 1.0]);
+            // the observation entries of theta are untouched
+            assert_eq!(canonical[7..], theta[7..]);
+            let det = 0.29 * 0.72 + 0.15 * 4.6;
+            assert!((c.a[1][0] + det).abs() < 1e-12 && (c.a[1][1] - 1.01).abs() < 1e-12);
+            for k in 0..20 {
+                let w = 0.15 * k as f64;
+                let (x, y) = (c.magnitude(w), estimate.magnitude(w));
+                assert!((x - y).abs() < 1e-10 * y, "{w}: {x} vs {y}");
+            }
+            // the second state is tracked stably given z's past: |g1 / s| < 1
+            let trace = c.a[1][1];
+            let g1 = c.q[0][1] - trace * c.q[0][0];
+            assert!((g1 / c.q[0][0]).abs() < 1.0, "{:?}", c.q);
+            let again = model.canonical(canonical.clone());
+            for (x, y) in again.iter().zip(&canonical) {
+                assert!((x - y).abs() < 1e-12 * y.abs().max(1.0));
+            }
+        }
+        // an unobservable basis is left alone
+        let mut theta = WienerEstimate::from_theta(&[0.0; 13]).theta().unwrap();
+        theta[1] = 0.0;
+        assert_eq!(model.canonical(theta.clone()), theta);
     }
 
     #[test]

@@ -80,7 +80,7 @@ use crate::model::{FilterModel, GuidedProposal, TransitionDensity};
 use crate::resample::multinomial;
 use crate::smoother::AdditiveFunctional;
 use crate::weights::{DrawFailure, draw_from_log_weights, find_cumulative, normalise_log_weights};
-use crate::{Series, SmcError};
+use crate::{History, Series, SmcError};
 
 /// How the conditional SMC treats the reference trajectory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -228,6 +228,43 @@ impl ConditionalSmc {
         Ok(CsmcSummary {
             loglik: self.loglik,
         })
+    }
+
+    /// The unconditional guided sweep alone (no reference, no trajectory drawn):
+    /// the filter of [`crate::GuidedFilter`]. Returns the log-likelihood estimate.
+    pub(crate) fn filter_guided<M, R>(
+        &mut self,
+        model: &M,
+        data: &Series,
+        rng: &mut R,
+    ) -> Result<f64, SmcError>
+    where
+        M: FilterModel + TransitionDensity + GuidedProposal,
+        R: rand::Rng + ?Sized,
+    {
+        self.forward(model, data, None, &Guided, rng)?;
+        Ok(self.loglik)
+    }
+
+    /// Copies the stored particle system of the last sweep into `history`
+    /// (particles, normalised weights and their logarithms, ancestors; no step marked
+    /// resampled).
+    pub(crate) fn write_history(&self, history: &mut History) {
+        let (n, m) = (self.state_dim, self.particles);
+        history.reset(n, m, self.steps);
+        let mut weights = vec![0.0; m];
+        for t in 0..self.steps {
+            let log_w = &self.log_weights[t * m..(t + 1) * m];
+            for (w, l) in weights.iter_mut().zip(log_w) {
+                *w = l.exp();
+            }
+            history.push(
+                &self.states[t * m * n..(t + 1) * m * n],
+                &weights,
+                log_w,
+                &self.ancestors[t * m..(t + 1) * m],
+            );
+        }
     }
 
     /// Draws the new trajectory from the stored particle system.

@@ -26,6 +26,7 @@
 pub mod conditional;
 mod error;
 pub mod filter;
+mod guided;
 mod history;
 mod lanes;
 mod model;
@@ -44,6 +45,7 @@ pub mod weights;
 pub use conditional::{ConditionalSmc, CsmcKernel, CsmcSummary};
 pub use error::SmcError;
 pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
+pub use guided::GuidedFilter;
 pub use history::History;
 pub use model::{
     FilterModel, GuidedProposal, InitialDensity, InitialSampler, ObservationDensity,

@@ -135,7 +135,7 @@ impl<'a, A: AffineModel, S: Smoother<A::Smc>> AffineEm<'a, A, S> {
         params: &AffineParams,
     ) -> Result<(f64, AffineStatistics), AffineEmError> {
         let smc = self.model.smc_model(params)?;
-        let pass = self.pass.run(&smc, &self.data)?;
+        let pass = self.pass.run(&smc, &self.data, None)?;
         let mut collector = StatisticsCollector::new(self.model, &self.data);
         self.smoother.additive(
             &smc,
@@ -160,7 +160,7 @@ impl<A: AffineModel, S: Smoother<A::Smc>> EmAlgorithm for AffineEm<'_, A, S> {
 
     fn loglik(&mut self, estimate: &AffineParams) -> Result<f64, AffineEmError> {
         let smc = self.model.smc_model(estimate)?;
-        Ok(self.pass.loglik(&smc, &self.data)?)
+        Ok(self.pass.loglik(&smc, &self.data, None)?)
     }
 
     fn is_exact(&self) -> bool {

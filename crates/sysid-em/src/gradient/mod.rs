@@ -50,8 +50,8 @@ pub use mstep::{MStepOptions, MStepOutcome, m_step};
 pub use objective::q_hat;
 
 use crate::EmAlgorithm;
-use crate::particle_pass::ParticlePass;
-use sysid_smc::{Series, SmcError, Smoother};
+use crate::particle_pass::{Guide, ParticlePass, guide};
+use sysid_smc::{GuidedProposal, Series, SmcError, Smoother};
 
 /// Errors of gradient EM.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -77,11 +77,12 @@ pub enum GradientEmError {
 
 /// Gradient EM as an [`EmAlgorithm`] for the shared runner; the estimate is the
 /// unconstrained parameter vector.
-pub struct GradientEm<'a, G, S> {
+pub struct GradientEm<'a, G: GradientModel, S> {
     model: &'a G,
     data: Series<'a>,
     smoother: S,
     pass: ParticlePass,
+    guide: Option<Guide<G::Smc>>,
     options: MStepOptions,
     last: Option<MStepOutcome>,
     hold_dynamics_for: usize,
@@ -104,6 +105,7 @@ impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {
             data,
             smoother,
             pass: ParticlePass::new(particles, seed)?,
+            guide: None,
             options,
             last: None,
             hold_dynamics_for: 0,
@@ -118,6 +120,19 @@ impl<'a, G: GradientModel, S: Smoother<G::Smc>> GradientEm<'a, G, S> {
     /// generalised EM step (`Q^` does not decrease).
     pub fn hold_dynamics_for(mut self, iterations: usize) -> Self {
         self.hold_dynamics_for = iterations;
+        self
+    }
+
+    /// Runs the E-step's filter fully adapted ([`sysid_smc::GuidedFilter`]) instead of
+    /// bootstrap, for a model with a tractable locally optimal proposal: its particles
+    /// are drawn where the observations allow, which keeps a small particle system on
+    /// the state when the output noise is small compared with the process noise (the
+    /// blind Wiener model). The final log-likelihood uses the same filter.
+    pub fn with_guided_filter(mut self) -> Self
+    where
+        G::Smc: GuidedProposal,
+    {
+        self.guide = Some(guide::<G::Smc>());
         self
     }
 
@@ -140,7 +155,7 @@ impl<G: GradientModel, S: Smoother<G::Smc>> EmAlgorithm for GradientEm<'_, G, S>
             )));
         }
         let smc = self.model.smc_model(current)?;
-        let pass = self.pass.run(&smc, &self.data)?;
+        let pass = self.pass.run(&smc, &self.data, self.guide)?;
         let loglik = pass.loglik;
         let (paths, _) =
             self.smoother
@@ -152,14 +167,14 @@ impl<G: GradientModel, S: Smoother<G::Smc>> EmAlgorithm for GradientEm<'_, G, S>
         };
         self.steps_done += 1;
         let outcome = m_step(self.model, &paths, &self.data, current, &options, warm)?;
-        let next = outcome.theta.clone();
+        let next = self.model.canonical(outcome.theta.clone());
         self.last = Some(outcome);
         Ok((next, loglik))
     }
 
     fn loglik(&mut self, estimate: &Vec<f64>) -> Result<f64, GradientEmError> {
         let smc = self.model.smc_model(estimate)?;
-        Ok(self.pass.loglik(&smc, &self.data)?)
+        Ok(self.pass.loglik(&smc, &self.data, self.guide)?)
     }
 
     fn is_exact(&self) -> bool {

@@ -81,6 +81,15 @@ pub trait GradientModel: Sync {
         None
     }
 
+    /// An equivalent parameter vector in the model's canonical form, applied to every
+    /// M-step's result, for models with parameters the data cannot identify (a state
+    /// basis): without it EM can drift along that direction until the values
+    /// overflow. It must leave the distribution of the outputs unchanged (up to the
+    /// initial-state prior). Default: `theta` unchanged.
+    fn canonical(&self, theta: Vec<f64>) -> Vec<f64> {
+        theta
+    }
+
     /// `log mu_theta(x_0)`.
     fn log_initial(&self, p: &Self::Params, x: &[f64]) -> f64;
     /// `log f_theta(next | x, u_t, t)`.

@@ -1,6 +1,7 @@
 //! The blind Wiener system of seed 001 (ALGORITHMS.md 4) and its estimation model for
 //! gradient EM.
 
+use crate::wiener_guided::GuideForm;
 use crate::wiener_observations::SortedObservations;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -352,9 +353,11 @@ impl GradientModel for WienerModel {
                 "the Wiener model needs 13 finite parameters, got {theta:?}"
             )));
         }
+        let p = Unpacked::new(theta);
         Ok(WienerSmc {
-            p: Unpacked::new(theta),
+            p,
             sd_p1: self.p1.sqrt(),
+            guide: p.guide_form(p.l11 * p.l11, [true, true]),
         })
     }
 
@@ -608,6 +611,8 @@ fn minimum_phase_noise(
 pub struct WienerSmc {
     pub(crate) p: Unpacked,
     pub(crate) sd_p1: f64,
+    /// The guided proposal's constants for fully observed steps.
+    pub(crate) guide: GuideForm,
 }
 
 impl StateSpace for WienerSmc {

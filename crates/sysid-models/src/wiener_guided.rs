@@ -82,8 +82,9 @@ impl Unpacked {
         [saturation, dead_zone]
     }
 
-    /// `p(z | y)` for the prior `z ~ N(mean, var)`; missing outputs (NaN) are left out.
-    fn z_posterior(&self, mean: f64, var: f64, y: &[f64]) -> ZPosterior {
+    /// The per-piece constants of `p(z | y)` for the prior variance `var`, with the
+    /// outputs marked observed (`observed[i]`) and the rest left out.
+    pub(crate) fn guide_form(&self, var: f64, observed: [bool; 2]) -> GuideForm {
         let mut cuts = self.beta;
         cuts.sort_by(f64::total_cmp);
         let edges = [
@@ -94,7 +95,7 @@ impl Unpacked {
             cuts[3],
             f64::INFINITY,
         ];
-        let mut pieces: [Piece; 5] = std::array::from_fn(|k| {
+        let pieces = std::array::from_fn(|k| {
             let (lo, hi) = (edges[k], edges[k + 1]);
             let inside = if lo == f64::NEG_INFINITY {
                 hi - 1.0
@@ -103,28 +104,92 @@ impl Unpacked {
             } else {
                 0.5 * (lo + hi)
             };
-            let (mut m, mut v, mut ln_c) = (mean, var, 0.0);
-            for (i, (slope, offset)) in self.affine_pieces(inside).into_iter().enumerate() {
-                if y[i].is_nan() {
-                    continue;
-                }
-                let d = y[i] - offset;
-                if slope {
+            let mut v = var;
+            let affine = self.affine_pieces(inside);
+            let outputs = std::array::from_fn(|i| {
+                let (slope, offset) = affine[i];
+                if !observed[i] {
+                    OutputForm::default()
+                } else if slope {
                     // y_i = z + offset + noise: a scalar Kalman update of z
                     let s = v + self.r[i];
-                    ln_c -= 0.5 * (LN_2PI + s.ln() + (d - m) * (d - m) / s);
                     let gain = v / s;
-                    m += gain * (d - m);
                     v *= self.r[i] / s;
+                    OutputForm {
+                        slope: 1.0,
+                        offset,
+                        ln_norm: -0.5 * (LN_2PI + s.ln()),
+                        half_inv_var: 0.5 / s,
+                        gain,
+                    }
                 } else {
-                    ln_c += self.observation_norm[i] - 0.5 * d * d * self.inv_r[i];
+                    OutputForm {
+                        slope: 0.0,
+                        offset,
+                        ln_norm: self.observation_norm[i],
+                        half_inv_var: 0.5 * self.inv_r[i],
+                        gain: 0.0,
+                    }
+                }
+            });
+            PieceForm {
+                lo,
+                hi,
+                outputs,
+                sd: v.sqrt(),
+            }
+        });
+        GuideForm { pieces }
+    }
+}
+
+/// What `p(z | y)` needs that does not depend on the prior mean or on `y`: per piece
+/// the interval, the Kalman gains and normalisations of its affine outputs, and the
+/// posterior standard deviation. Made once per parameter value (and prior variance).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct GuideForm {
+    pieces: [PieceForm; 5],
+}
+
+#[derive(Debug, Clone, Copy)]
+struct PieceForm {
+    lo: f64,
+    hi: f64,
+    outputs: [OutputForm; 2],
+    sd: f64,
+}
+
+/// One output on one piece: `y_i = slope z + offset + N(0, r_i)`. Its factor is
+/// `exp(ln_norm - half_inv_var e^2)` with `e = y_i - offset - slope m`, and the mean
+/// moves by `gain e`; an unobserved output has every constant 0.
+#[derive(Debug, Clone, Copy, Default)]
+struct OutputForm {
+    slope: f64,
+    offset: f64,
+    ln_norm: f64,
+    half_inv_var: f64,
+    gain: f64,
+}
+
+impl GuideForm {
+    /// `p(z | y)` for the prior `z ~ N(mean, var)` (the variance of the form); the
+    /// outputs the form leaves out are ignored.
+    fn posterior(&self, mean: f64, y: &[f64]) -> ZPosterior {
+        let mut pieces: [Piece; 5] = std::array::from_fn(|k| {
+            let form = &self.pieces[k];
+            let (mut m, mut ln_c) = (mean, 0.0);
+            for (o, &y) in form.outputs.iter().zip(y) {
+                if o.half_inv_var > 0.0 {
+                    let e = y - o.offset - o.slope * m;
+                    ln_c += o.ln_norm - o.half_inv_var * e * e;
+                    m += o.gain * e;
                 }
             }
             Piece {
-                lo,
-                hi,
+                lo: form.lo,
+                hi: form.hi,
                 mean: m,
-                sd: v.sqrt(),
+                sd: form.sd,
                 // for now the bound ln c >= ln(c P(lo <= z <= hi))
                 ln_mass: ln_c,
             }
@@ -132,10 +197,11 @@ impl Unpacked {
         // the interval probabilities, largest bound first; a piece whose bound is
         // NEGLIGIBLE below the largest mass so far is left out (a relative change
         // below e^-40 of the total)
-        let mut order = [0, 1, 2, 3, 4];
-        order.sort_by(|&i, &j| pieces[j].ln_mass.total_cmp(&pieces[i].ln_mass));
+        let first = (0..5)
+            .max_by(|&i, &j| pieces[i].ln_mass.total_cmp(&pieces[j].ln_mass))
+            .unwrap_or(0);
         let mut best = f64::NEG_INFINITY;
-        for k in order {
+        for k in std::iter::once(first).chain((0..5).filter(|&k| k != first)) {
             let p = &mut pieces[k];
             if p.ln_mass < best - NEGLIGIBLE {
                 p.ln_mass = f64::NEG_INFINITY;
@@ -151,16 +217,12 @@ impl Unpacked {
             };
             best = best.max(p.ln_mass);
         }
-        let top = pieces
-            .iter()
-            .map(|p| p.ln_mass)
-            .fold(f64::NEG_INFINITY, f64::max);
-        let ln_total = if top == f64::NEG_INFINITY {
-            top
+        let ln_total = if best == f64::NEG_INFINITY {
+            best
         } else {
-            top + pieces
+            best + pieces
                 .iter()
-                .map(|p| (p.ln_mass - top).exp())
+                .map(|p| (p.ln_mass - best).exp())
                 .sum::<f64>()
                 .ln()
         };
@@ -208,6 +270,24 @@ impl WienerSmc {
             a[1][0] * x[0] + a[1][1] * x[1],
         ]
     }
+
+    /// `p(z_{t+1} | x_t, y_{t+1})` given the predicted mean of `z_{t+1}`.
+    fn step_posterior(&self, mean: f64, y: &[f64]) -> ZPosterior {
+        let observed = [!y[0].is_nan(), !y[1].is_nan()];
+        if observed == [true, true] {
+            self.guide.posterior(mean, y)
+        } else {
+            let var = self.p.l11 * self.p.l11;
+            self.p.guide_form(var, observed).posterior(mean, y)
+        }
+    }
+
+    /// `p(z_0 | y_0)`.
+    fn initial_posterior(&self, y: &[f64]) -> ZPosterior {
+        let observed = [!y[0].is_nan(), !y[1].is_nan()];
+        let var = self.sd_p1 * self.sd_p1;
+        self.p.guide_form(var, observed).posterior(0.0, y)
+    }
 }
 
 impl GuidedProposal for WienerSmc {
@@ -219,13 +299,13 @@ impl GuidedProposal for WienerSmc {
         rng: &mut R,
     ) {
         let var = self.sd_p1 * self.sd_p1;
-        x[0] = self.p.z_posterior(0.0, var, y).sample(0.0, var, rng);
+        x[0] = self.initial_posterior(y).sample(0.0, var, rng);
         let e: f64 = StandardNormal.sample(rng);
         x[1] = self.sd_p1 * e;
     }
 
     fn log_initial_predictive(&self, _u: &[f64], y: &[f64]) -> f64 {
-        self.p.z_posterior(0.0, self.sd_p1 * self.sd_p1, y).ln_total
+        self.initial_posterior(y).ln_total
     }
 
     fn log_predictive(
@@ -236,10 +316,7 @@ impl GuidedProposal for WienerSmc {
         _u_next: &[f64],
         y_next: &[f64],
     ) -> f64 {
-        let mean = self.predicted(x)[0];
-        self.p
-            .z_posterior(mean, self.p.l11 * self.p.l11, y_next)
-            .ln_total
+        self.step_posterior(self.predicted(x)[0], y_next).ln_total
     }
 
     fn sample_guided<R: Rng + ?Sized>(
@@ -255,8 +332,7 @@ impl GuidedProposal for WienerSmc {
         let mean = self.predicted(x);
         let var = self.p.l11 * self.p.l11;
         let z = self
-            .p
-            .z_posterior(mean[0], var, y_next)
+            .step_posterior(mean[0], y_next)
             .sample(mean[0], var, rng);
         let e1 = (z - mean[0]) / self.p.l11;
         let e2: f64 = StandardNormal.sample(rng);

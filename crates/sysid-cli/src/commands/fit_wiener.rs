@@ -4,7 +4,9 @@
 //! The start is the lecture's: the linear part from N4SID on y1, r1 = r2 = 0.1, each
 //! breakpoint at a tenth of the reference system's. `--particles` sets the filter's
 //! particles and the backward trajectories (FFBSi by rejection); `--iters` the EM
-//! iterations (run exactly).
+//! iterations (run exactly). The E-step's filter is the fully adapted one (exact for
+//! the piecewise-linear outputs), and the estimate is reported in the canonical form
+//! of `WienerModel` (companion `A`, minimum-phase side of `Q`).
 
 use super::fit::Options;
 use super::particle::series_of;
@@ -73,7 +75,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     .map_err(|source| CliError::GradientEm {
         context: "options".into(),
         source,
-    })?;
+    })?
+    .with_guided_filter();
     let options = EmOptions {
         max_iterations: o.max_iter,
         tol: 0.0,

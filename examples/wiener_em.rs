@@ -7,7 +7,8 @@
 //! noise variances start at v), `WIENER_PARTICLES=m` (the E-step's filter particles,
 //! default 100; the smoother draws 100 paths), `WIENER_HOLD=n` (hold the linear part
 //! for the first n M-steps), `WIENER_FILTER=bootstrap` (the E-step's filter; default
-//! `guided`, the fully adapted one). Prints the filter's log-likelihood at
+//! `guided`, the fully adapted one), `WIENER_EVERY=1` (trace every iteration, not only
+//! 1-10 and every tenth). Prints the filter's log-likelihood at
 //! the start with M = 100 and M = 10 000.
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
 use sysid::em::{EmObserver, EmOptions, IterationInfo, run_em};

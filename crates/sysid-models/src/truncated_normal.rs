@@ -91,11 +91,18 @@ pub(crate) fn sample_interval<R: Rng + ?Sized>(alpha: f64, beta: f64, rng: &mut 
             }
         }
     } else {
-        loop {
-            let z = alpha + (beta - alpha) * rng.random::<f64>();
-            if open_uniform(rng).ln() <= -0.5 * z * z {
-                return z;
-            }
+        sample_uniform_proposal(alpha, beta, 0.0, rng)
+    }
+}
+
+/// A draw of `Z` given `alpha <= Z <= beta` (both finite) by a uniform proposal,
+/// accepted with probability `exp((mode^2 - z^2) / 2)`, where `mode` is the point of
+/// the interval nearest 0 (the density's largest value there).
+fn sample_uniform_proposal<R: Rng + ?Sized>(alpha: f64, beta: f64, mode: f64, rng: &mut R) -> f64 {
+    loop {
+        let z = alpha + (beta - alpha) * rng.random::<f64>();
+        if open_uniform(rng).ln() <= 0.5 * (mode - z) * (mode + z) {
+            return z;
         }
     }
 }
@@ -112,12 +119,7 @@ fn sample_upper<R: Rng + ?Sized>(alpha: f64, beta: f64, rng: &mut R) -> f64 {
             }
         }
     } else {
-        loop {
-            let z = alpha + (beta - alpha) * rng.random::<f64>();
-            if open_uniform(rng).ln() <= 0.5 * (alpha - z) * (alpha + z) {
-                return z;
-            }
-        }
+        sample_uniform_proposal(alpha, beta, alpha, rng)
     }
 }
 

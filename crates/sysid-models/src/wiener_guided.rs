@@ -24,8 +24,7 @@
 //! Each piece's constant bounds its mass, so the interval probabilities (the costly
 //! part: `erfc`) are computed largest bound first, and a piece whose bound lies more
 //! than 40 log units below the largest mass so far is left out (a relative change
-//! of the total below `e^-40`). Typically one or two of the five pieces are
-//! evaluated.
+//! of the total below `e^-40`).
 //!
 //! # Complexity
 //! O(1) per particle: at most five interval probabilities and, for a draw, one

@@ -71,18 +71,29 @@ impl AffineModel for NlbenchAffine {
         4
     }
 
-    #[inline]
-    fn regressors(&self, t: usize, x: &[f64], u: &[f64], out: &mut [f64]) {
-        self.regressors_batch(t, x, u, out);
+    fn regressors(&self, t: usize, x: &[f64], _u: &[f64], out: &mut [f64]) {
+        let x = x[0];
+        out.copy_from_slice(&[
+            x,
+            x / (1.0 + x * x),
+            crate::nlbench::forcing_cosine(t),
+            x * x,
+        ]);
     }
 
-    fn regressors_batch(&self, t: usize, states: &[f64], _u: &[f64], out: &mut [f64]) {
+    fn regressor_columns(&self, t: usize, states: &[f64], _u: &[f64], columns: &mut [f64]) {
         let forcing = crate::nlbench::forcing_cosine(t);
-        for (&x, alpha) in states.iter().zip(out.chunks_exact_mut(4)) {
-            alpha[0] = x;
-            alpha[1] = x / (1.0 + x * x);
-            alpha[2] = forcing;
-            alpha[3] = x * x;
+        let paths = states.len();
+        let (x, rest) = columns.split_at_mut(paths);
+        let (ratio, rest) = rest.split_at_mut(paths);
+        let (cosine, square) = rest.split_at_mut(paths);
+        x.copy_from_slice(states);
+        for (r, &x) in ratio.iter_mut().zip(states) {
+            *r = x / (1.0 + x * x);
+        }
+        cosine.fill(forcing);
+        for (s, &x) in square[..paths].iter_mut().zip(states) {
+            *s = x * x;
         }
     }
 

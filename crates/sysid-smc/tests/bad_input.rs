@@ -2,16 +2,18 @@
 
 use rand_distr::{Distribution, StandardNormal};
 use sysid_smc::{
-    Ffbsi, FfbsiReject, FilterOptions, InitialSampler, ObservationDensity, ParticleFilter, Series,
-    SmcError, Smoother, StateSpace, Tanizaki, TransitionBound, TransitionDensity,
-    TransitionSampler,
+    Ffbsi, FfbsiReject, FilterOptions, InitialSampler, ObservationDensity, ParticleFilter,
+    ScalarGaussianKernel, Series, SmcError, Smoother, StateSpace, Tanizaki, TransitionBound,
+    TransitionDensity, TransitionSampler,
 };
 
 /// A random walk observed through a bounded sensor: `y_t` in [x - 1, x + 1] uniformly,
 /// so an output far from every particle is impossible (log-density -inf).
-/// `nan_at` makes the observation density NaN at one step (a broken model).
+/// `nan_at` makes the observation density NaN at one step, `nan_mean_at` the
+/// transition mean of one particle (broken models).
 struct BoundedSensor {
     nan_at: Option<usize>,
+    nan_mean_at: Option<usize>,
 }
 
 impl StateSpace for BoundedSensor {
@@ -49,14 +51,32 @@ impl ObservationDensity for BoundedSensor {
         }
     }
 }
+/// The scalar Gaussian form `N(x, 0.01)`, which sends Tanizaki's smoother down its
+/// nearest-mean route.
 impl TransitionDensity for BoundedSensor {
-    fn log_transition(&self, _: usize, x: &[f64], _: &[f64], next: &[f64]) -> f64 {
-        let e = (next[0] - x[0]) / 0.1;
-        -0.5 * e * e
+    fn log_transition(&self, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
+        let mut means = Vec::new();
+        let kernel = self.scalar_gaussian_means(t, u, x, &mut means).unwrap();
+        kernel.log_density(means[0], next[0])
+    }
+
+    fn scalar_gaussian_means(
+        &self,
+        t: usize,
+        _: &[f64],
+        from: &[f64],
+        means: &mut Vec<f64>,
+    ) -> Option<ScalarGaussianKernel> {
+        means.clear();
+        means.extend_from_slice(from);
+        if Some(t) == self.nan_mean_at {
+            means[from.len() / 2] = f64::NAN;
+        }
+        Some(ScalarGaussianKernel::with_variance(0.01))
     }
 }
 
-/// A wrong bound: the log-density reaches 0 where `next = x`.
+/// A wrong bound: the log-density reaches `-ln(2 pi 0.01) / 2 = 1.38` where `next = x`.
 impl TransitionBound for BoundedSensor {
     fn log_transition_bound(&self, _: usize, _: &[f64]) -> f64 {
         -1.0
@@ -77,7 +97,14 @@ fn impossible_observation_is_degenerate_weights_at_its_time() {
     let y = [0.0, 0.1, 50.0, 0.0];
     let data = Series::new(&y, 1).unwrap();
     let err = filter(100, false)
-        .run(&BoundedSensor { nan_at: None }, &data, 1)
+        .run(
+            &BoundedSensor {
+                nan_at: None,
+                nan_mean_at: None,
+            },
+            &data,
+            1,
+        )
         .unwrap_err();
     assert_eq!(err, SmcError::DegenerateWeights { t: 2 });
     assert!(err.to_string().contains("time 2"));
@@ -88,7 +115,14 @@ fn nan_observation_density_is_reported_with_time_and_particle() {
     let y = [0.0, 0.1, 0.2];
     let data = Series::new(&y, 1).unwrap();
     let err = filter(10, false)
-        .run(&BoundedSensor { nan_at: Some(1) }, &data, 1)
+        .run(
+            &BoundedSensor {
+                nan_at: Some(1),
+                nan_mean_at: None,
+            },
+            &data,
+            1,
+        )
         .unwrap_err();
     assert!(
         matches!(
@@ -108,7 +142,16 @@ fn missing_outputs_skip_the_update_and_keep_the_likelihood_finite() {
     let y = [0.0, f64::NAN, 0.2];
     let data = Series::new(&y, 1).unwrap();
     let mut pf = filter(100, true);
-    let run = pf.run(&BoundedSensor { nan_at: None }, &data, 1).unwrap();
+    let run = pf
+        .run(
+            &BoundedSensor {
+                nan_at: None,
+                nan_mean_at: None,
+            },
+            &data,
+            1,
+        )
+        .unwrap();
     assert!(run.loglik.is_finite());
     assert!(pf.means().iter().all(|m| m.is_finite()));
 }
@@ -180,7 +223,10 @@ fn malformed_series_and_options_are_rejected() {
 fn smoothers_check_paths_and_history_length() {
     let y = [0.0, 0.1, 0.2];
     let data = Series::new(&y, 1).unwrap();
-    let model = BoundedSensor { nan_at: None };
+    let model = BoundedSensor {
+        nan_at: None,
+        nan_mean_at: None,
+    };
     let mut pf = filter(20, true);
     pf.run(&model, &data, 1).unwrap();
     let history = pf.history().unwrap();
@@ -211,7 +257,10 @@ fn smoothers_check_paths_and_history_length() {
 fn a_transition_bound_below_the_density_is_a_typed_error() {
     let y = [0.0, 0.1, 0.2, 0.1];
     let data = Series::new(&y, 1).unwrap();
-    let model = BoundedSensor { nan_at: None };
+    let model = BoundedSensor {
+        nan_at: None,
+        nan_mean_at: None,
+    };
     let mut pf = filter(50, true);
     pf.run(&model, &data, 1).unwrap();
     let err = FfbsiReject {
@@ -222,7 +271,8 @@ fn a_transition_bound_below_the_density_is_a_typed_error() {
     .trajectories(&model, pf.history().unwrap(), &data, 1)
     .unwrap_err();
     // the first step walked back is t = 2; every trial's log-density there is above -1
-    // for the nearby particles, so some trial of the block sees it
+    // for the nearby particles, so some trial of the block sees it (the density's
+    // largest value is -ln(2 pi 0.01) / 2)
     match err {
         SmcError::BoundViolated {
             t,
@@ -230,8 +280,44 @@ fn a_transition_bound_below_the_density_is_a_typed_error() {
             log_bound,
         } => {
             assert_eq!((t, log_bound), (2, -1.0));
-            assert!(log_density > -1.0 && log_density <= 0.0, "{log_density}");
+            let peak = -0.5 * (2.0 * std::f64::consts::PI * 0.01).ln();
+            assert!(log_density > -1.0 && log_density <= peak, "{log_density}");
         }
         other => panic!("{other:?}"),
     }
+}
+
+#[test]
+fn a_nan_transition_mean_is_a_typed_error_at_its_step_in_tanizaki() {
+    let y = [0.0, 0.1, 0.2, 0.1, 0.0];
+    let data = Series::new(&y, 1).unwrap();
+    let model = BoundedSensor {
+        nan_at: None,
+        nan_mean_at: Some(2),
+    };
+    let mut pf = filter(40, true);
+    pf.run(&model, &data, 1).unwrap();
+    let history = pf.history().unwrap();
+    // enough trials that no draw needs the exact fallback (which would meet the NaN
+    // anyway): only the check of the means can find it
+    let patient = Tanizaki {
+        max_trials: Some(100_000),
+        ..Tanizaki::default()
+    };
+    let err = patient.trajectories(&model, history, &data, 1).unwrap_err();
+    assert!(
+        matches!(err, SmcError::InvalidDensity { t: 2, .. }),
+        "{err:?}"
+    );
+    // the same model without the NaN smooths
+    let fine = BoundedSensor {
+        nan_at: None,
+        nan_mean_at: None,
+    };
+    pf.run(&fine, &data, 1).unwrap();
+    assert!(
+        patient
+            .trajectories(&fine, pf.history().unwrap(), &data, 1)
+            .is_ok()
+    );
 }

@@ -48,13 +48,19 @@ pub trait AffineModel: Sync {
     fn regressors(&self, t: usize, x: &[f64], u: &[f64], out: &mut [f64]);
 
     /// Writes the regressors of several states at step `t` (path-major, stride
-    /// `state_dim`) into `out` (stride `regressor_dim`). The default calls
-    /// [`regressors`](Self::regressors) per state; models override it to compute the
-    /// time-dependent terms once.
-    fn regressors_batch(&self, t: usize, states: &[f64], u: &[f64], out: &mut [f64]) {
+    /// `state_dim`) by component: `columns[i * paths + k]` is component `i` of path
+    /// `k`'s regressor vector. The E-step's statistics are sums over paths of products
+    /// of these columns. The default transposes [`regressors`](Self::regressors) path
+    /// by path; models override it to write the columns directly (vectorised).
+    fn regressor_columns(&self, t: usize, states: &[f64], u: &[f64], columns: &mut [f64]) {
         let (n, r) = (self.state_dim(), self.regressor_dim());
-        for (x, alpha) in states.chunks_exact(n).zip(out.chunks_exact_mut(r)) {
-            self.regressors(t, x, u, alpha);
+        let paths = states.len() / n;
+        let mut alpha = vec![0.0; r];
+        for (k, x) in states.chunks_exact(n).enumerate() {
+            self.regressors(t, x, u, &mut alpha);
+            for (i, &a) in alpha.iter().enumerate() {
+                columns[i * paths + k] = a;
+            }
         }
     }
 

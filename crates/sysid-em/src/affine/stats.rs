@@ -84,7 +84,6 @@ pub struct StatisticsCollector<'a, A> {
     model: &'a A,
     data: &'a Series<'a>,
     stats: AffineStatistics,
-    alphas: Vec<f64>,
     /// The step's `[alpha; x_{t+1}]` by component: column `i` holds component `i` of
     /// every path.
     columns: Vec<f64>,
@@ -100,7 +99,6 @@ impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
             model,
             data,
             stats: AffineStatistics::zeros(r, n, p),
-            alphas: Vec::new(),
             columns: Vec::new(),
             step_sum: vec![0.0; (r + n) * (r + n)],
             alpha_sum: vec![0.0; r],
@@ -129,18 +127,16 @@ impl<A: AffineModel> AdditiveFunctional for StatisticsCollector<'_, A> {
     ) {
         let (r, n) = (self.model.regressor_dim(), state_dim);
         let paths = states.len() / n;
-        self.alphas.resize(paths * r, 0.0);
-        self.model
-            .regressors_batch(t, states, self.data.input(t), &mut self.alphas);
         // Sums over the paths of [alpha; x_{t+1}][alpha; x_{t+1}]' (alpha alpha' alone
         // at the last step) and of alpha.
         let k = if next.is_some() { r + n } else { r };
         self.columns.resize(k * paths, 0.0);
-        for (path, alpha) in self.alphas.chunks_exact(r).enumerate() {
-            for (i, &a) in alpha.iter().enumerate() {
-                self.columns[i * paths + path] = a;
-            }
-        }
+        self.model.regressor_columns(
+            t,
+            states,
+            self.data.input(t),
+            &mut self.columns[..r * paths],
+        );
         if let Some(next) = next {
             for (path, x) in next.chunks_exact(n).enumerate() {
                 for (i, &v) in x.iter().enumerate() {

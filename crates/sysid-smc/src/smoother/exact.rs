@@ -107,7 +107,8 @@ impl<M: TransitionDensity> DispatchedStep for ExactStep<'_, M> {
                 self.kernel = self
                     .model
                     .scalar_gaussian_means(t, self.data.input(t), cloud, &mut self.means)
-                    .filter(ScalarGaussianKernel::is_proper);
+                    .filter(ScalarGaussianKernel::is_proper)
+                    .filter(|_| nearest::means_usable(&self.means));
             }
             if let Some(kernel) = self.kernel {
                 let ancestors = self.history.ancestors(t + 1);

@@ -184,3 +184,28 @@ impl AffineModel for LinearAffine {
             .map_err(|e| AffineEmError::InvalidParams(e.to_string()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The E-step reads the columns; they hold the same numbers as `regressors` path by
+    /// path, bit for bit (the default transposition of the trait).
+    #[test]
+    fn nlbench_columns_are_the_transposed_regressors() {
+        let states = [-3.2, -0.4, 0.0, 0.7, 1.9, 12.5, -25.0];
+        let paths = states.len();
+        for t in [0, 7, 999, 5000] {
+            let mut columns = vec![f64::NAN; 4 * paths];
+            NlbenchAffine.regressor_columns(t, &states, &[], &mut columns);
+            for (k, &x) in states.iter().enumerate() {
+                let mut alpha = [0.0; 4];
+                NlbenchAffine.regressors(t, &[x], &[], &mut alpha);
+                for (i, &a) in alpha.iter().enumerate() {
+                    assert_eq!(columns[i * paths + k].to_bits(), a.to_bits(), "t {t}");
+                }
+            }
+            assert_eq!(columns[2 * paths], (1.2 * (t as f64 + 1.0)).cos());
+        }
+    }
+}

@@ -92,7 +92,7 @@ impl AffineModel for NlbenchAffine {
             *r = x / (1.0 + x * x);
         }
         cosine.fill(forcing);
-        for (s, &x) in square[..paths].iter_mut().zip(states) {
+        for (s, &x) in square.iter_mut().zip(states) {
             *s = x * x;
         }
     }

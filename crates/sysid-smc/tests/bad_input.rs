@@ -11,6 +11,7 @@ use sysid_smc::{
 /// so an output far from every particle is impossible (log-density -inf).
 /// `nan_at` makes the observation density NaN at one step, `nan_mean_at` the
 /// transition mean of one particle (broken models).
+#[derive(Default)]
 struct BoundedSensor {
     nan_at: Option<usize>,
     nan_mean_at: Option<usize>,
@@ -97,14 +98,7 @@ fn impossible_observation_is_degenerate_weights_at_its_time() {
     let y = [0.0, 0.1, 50.0, 0.0];
     let data = Series::new(&y, 1).unwrap();
     let err = filter(100, false)
-        .run(
-            &BoundedSensor {
-                nan_at: None,
-                nan_mean_at: None,
-            },
-            &data,
-            1,
-        )
+        .run(&BoundedSensor::default(), &data, 1)
         .unwrap_err();
     assert_eq!(err, SmcError::DegenerateWeights { t: 2 });
     assert!(err.to_string().contains("time 2"));
@@ -118,7 +112,7 @@ fn nan_observation_density_is_reported_with_time_and_particle() {
         .run(
             &BoundedSensor {
                 nan_at: Some(1),
-                nan_mean_at: None,
+                ..Default::default()
             },
             &data,
             1,
@@ -142,16 +136,7 @@ fn missing_outputs_skip_the_update_and_keep_the_likelihood_finite() {
     let y = [0.0, f64::NAN, 0.2];
     let data = Series::new(&y, 1).unwrap();
     let mut pf = filter(100, true);
-    let run = pf
-        .run(
-            &BoundedSensor {
-                nan_at: None,
-                nan_mean_at: None,
-            },
-            &data,
-            1,
-        )
-        .unwrap();
+    let run = pf.run(&BoundedSensor::default(), &data, 1).unwrap();
     assert!(run.loglik.is_finite());
     assert!(pf.means().iter().all(|m| m.is_finite()));
 }
@@ -223,10 +208,7 @@ fn malformed_series_and_options_are_rejected() {
 fn smoothers_check_paths_and_history_length() {
     let y = [0.0, 0.1, 0.2];
     let data = Series::new(&y, 1).unwrap();
-    let model = BoundedSensor {
-        nan_at: None,
-        nan_mean_at: None,
-    };
+    let model = BoundedSensor::default();
     let mut pf = filter(20, true);
     pf.run(&model, &data, 1).unwrap();
     let history = pf.history().unwrap();
@@ -257,10 +239,7 @@ fn smoothers_check_paths_and_history_length() {
 fn a_transition_bound_below_the_density_is_a_typed_error() {
     let y = [0.0, 0.1, 0.2, 0.1];
     let data = Series::new(&y, 1).unwrap();
-    let model = BoundedSensor {
-        nan_at: None,
-        nan_mean_at: None,
-    };
+    let model = BoundedSensor::default();
     let mut pf = filter(50, true);
     pf.run(&model, &data, 1).unwrap();
     let err = FfbsiReject {
@@ -292,8 +271,8 @@ fn a_nan_transition_mean_is_a_typed_error_at_its_step_in_tanizaki() {
     let y = [0.0, 0.1, 0.2, 0.1, 0.0];
     let data = Series::new(&y, 1).unwrap();
     let model = BoundedSensor {
-        nan_at: None,
         nan_mean_at: Some(2),
+        ..Default::default()
     };
     let mut pf = filter(40, true);
     pf.run(&model, &data, 1).unwrap();
@@ -310,10 +289,7 @@ fn a_nan_transition_mean_is_a_typed_error_at_its_step_in_tanizaki() {
         "{err:?}"
     );
     // the same model without the NaN smooths
-    let fine = BoundedSensor {
-        nan_at: None,
-        nan_mean_at: None,
-    };
+    let fine = BoundedSensor::default();
     pf.run(&fine, &data, 1).unwrap();
     assert!(
         patient

@@ -81,6 +81,7 @@ impl AffineModel for NlbenchAffine {
         ]);
     }
 
+    #[inline]
     fn regressor_columns(&self, t: usize, states: &[f64], _u: &[f64], columns: &mut [f64]) {
         let forcing = crate::nlbench::forcing_cosine(t);
         let paths = states.len();

@@ -26,6 +26,7 @@
 //! ALGORITHMS.md 3.
 
 mod model;
+mod moments;
 mod mstep;
 mod psaem;
 mod stats;

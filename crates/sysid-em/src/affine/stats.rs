@@ -1,7 +1,9 @@
 //! The E-step statistics of affine EM, accumulated as an additive functional.
 
 use super::AffineModel;
+use super::moments::PathMoments;
 use nalgebra::{DMatrix, DVector};
+use sysid_linalg::simd::{Kernel, dispatch};
 use sysid_smc::{AdditiveFunctional, Series};
 
 /// Smoothed second moments of `[alpha_t; x_{t+1}]` (state block, `t < T - 1`) and of
@@ -52,29 +54,6 @@ impl AffineStatistics {
     }
 }
 
-/// `sum_k a_k b_k` with four interleaved partial sums (so the compiler vectorises it).
-///
-/// The same idea as `sysid_linalg::dot`, which pairs the partial sums differently.
-/// Kept until the seed-000 study (docs/particle-em.md) is next rerun: switching changes
-/// the round-off of the statistics, and particle EM amplifies that into different runs.
-#[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for i in 0..4 {
-            acc[i] += x[i] * y[i];
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
-}
-
 /// Feeds smoothed pairs `(x_t, x_{t+1})` into [`AffineStatistics`].
 ///
 /// Per step it sums the outer products of `[alpha; x_{t+1}]` over the paths once and
@@ -89,6 +68,7 @@ pub struct StatisticsCollector<'a, A> {
     columns: Vec<f64>,
     step_sum: Vec<f64>,
     alpha_sum: Vec<f64>,
+    moments: PathMoments,
 }
 
 impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
@@ -101,7 +81,8 @@ impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
             stats: AffineStatistics::zeros(r, n, p),
             columns: Vec::new(),
             step_sum: vec![0.0; (r + n) * (r + n)],
-            alpha_sum: vec![0.0; r],
+            alpha_sum: vec![0.0; r + n],
+            moments: PathMoments::default(),
         }
     }
 
@@ -118,6 +99,55 @@ impl<A: AffineModel> AdditiveFunctional for StatisticsCollector<'_, A> {
     }
 
     fn add_step(
+        &mut self,
+        t: usize,
+        states: &[f64],
+        next: Option<&[f64]>,
+        state_dim: usize,
+        weight: f64,
+    ) {
+        dispatch(StepKernel {
+            collector: self,
+            t,
+            states,
+            next,
+            state_dim,
+            weight,
+        });
+    }
+}
+
+/// One step of [`StatisticsCollector::add_step`], compiled for the CPU's vector set
+/// (the regressors and the step's sums over the paths are short vector loops).
+struct StepKernel<'c, 'a, 's, A> {
+    collector: &'c mut StatisticsCollector<'a, A>,
+    t: usize,
+    states: &'s [f64],
+    next: Option<&'s [f64]>,
+    state_dim: usize,
+    weight: f64,
+}
+
+impl<A: AffineModel> Kernel for StepKernel<'_, '_, '_, A> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run(self) {
+        let StepKernel {
+            collector,
+            t,
+            states,
+            next,
+            state_dim,
+            weight,
+        } = self;
+        collector.accumulate(t, states, next, state_dim, weight);
+    }
+}
+
+impl<A: AffineModel> StatisticsCollector<'_, A> {
+    #[inline(always)]
+    fn accumulate(
         &mut self,
         t: usize,
         states: &[f64],
@@ -144,15 +174,13 @@ impl<A: AffineModel> AdditiveFunctional for StatisticsCollector<'_, A> {
                 }
             }
         }
-        let column = |i: usize| &self.columns[i * paths..(i + 1) * paths];
-        for j in 0..k {
-            for i in 0..=j {
-                self.step_sum[j * k + i] = dot(column(i), column(j));
-            }
-        }
-        for (i, s) in self.alpha_sum.iter_mut().enumerate() {
-            *s = column(i).iter().sum();
-        }
+        self.moments.sum(
+            &self.columns,
+            paths,
+            k,
+            &mut self.step_sum,
+            &mut self.alpha_sum,
+        );
         let total_weight = weight * paths as f64;
         if t == 0 {
             let s = &mut self.stats;
@@ -185,7 +213,7 @@ impl<A: AffineModel> AdditiveFunctional for StatisticsCollector<'_, A> {
             }
             for (jy, &yj) in y.iter().enumerate() {
                 let column = &mut output[(r + jy) * out_k..(r + jy + 1) * out_k];
-                for (c, &a) in column[..r].iter_mut().zip(&self.alpha_sum) {
+                for (c, &a) in column[..r].iter_mut().zip(&self.alpha_sum[..r]) {
                     *c += weight * a * yj;
                 }
                 for (c, &yi) in column[r..=r + jy].iter_mut().zip(y) {

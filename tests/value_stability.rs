@@ -99,8 +99,10 @@ const PINNED_NLBENCH: [u64; 4] = [
     // instead of one ziggurat draw per particle; the smoothers re-pinned 2026-11-23 on
     // purpose a third time: the rejection trials take their uniforms and exponentials
     // in bulk, a run per round (`trial_numbers`), and FFBSi-reject's alias table is
-    // built by the sweep (another table for the same weights)
+    // built by the sweep (another table for the same weights); FFBSi-reject re-pinned
+    // 2026-11-23 on purpose: for scalar Gaussian transitions each path's envelope is
+    // its own maximum (the nearest transition mean), not the model's global bound
     0xc04a3f96f4c3d947,
     0x3fe943ba0f60d29d,
-    0x3feea5d8521e5f54,
+    0x3feee76357d29293,
 ];

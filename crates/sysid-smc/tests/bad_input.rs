@@ -10,11 +10,13 @@ use sysid_smc::{
 /// A random walk observed through a bounded sensor: `y_t` in [x - 1, x + 1] uniformly,
 /// so an output far from every particle is impossible (log-density -inf).
 /// `nan_at` makes the observation density NaN at one step, `nan_mean_at` the
-/// transition mean of one particle (broken models).
+/// transition mean of one particle (broken models); `hide_scalar_form` withholds the
+/// scalar Gaussian form, so that the smoothers take their general routes.
 #[derive(Default)]
 struct BoundedSensor {
     nan_at: Option<usize>,
     nan_mean_at: Option<usize>,
+    hide_scalar_form: bool,
 }
 
 impl StateSpace for BoundedSensor {
@@ -53,12 +55,10 @@ impl ObservationDensity for BoundedSensor {
     }
 }
 /// The scalar Gaussian form `N(x, 0.01)`, which sends Tanizaki's smoother down its
-/// nearest-mean route.
+/// nearest-mean route and rejection FFBSi to each row's own bound.
 impl TransitionDensity for BoundedSensor {
-    fn log_transition(&self, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
-        let mut means = Vec::new();
-        let kernel = self.scalar_gaussian_means(t, u, x, &mut means).unwrap();
-        kernel.log_density(means[0], next[0])
+    fn log_transition(&self, _: usize, x: &[f64], _: &[f64], next: &[f64]) -> f64 {
+        ScalarGaussianKernel::with_variance(0.01).log_density(x[0], next[0])
     }
 
     fn scalar_gaussian_means(
@@ -68,6 +68,9 @@ impl TransitionDensity for BoundedSensor {
         from: &[f64],
         means: &mut Vec<f64>,
     ) -> Option<ScalarGaussianKernel> {
+        if self.hide_scalar_form {
+            return None;
+        }
         means.clear();
         means.extend_from_slice(from);
         if Some(t) == self.nan_mean_at {
@@ -239,16 +242,21 @@ fn smoothers_check_paths_and_history_length() {
 fn a_transition_bound_below_the_density_is_a_typed_error() {
     let y = [0.0, 0.1, 0.2, 0.1];
     let data = Series::new(&y, 1).unwrap();
-    let model = BoundedSensor::default();
+    // the model's bound is used only without the scalar Gaussian form
+    let model = BoundedSensor {
+        hide_scalar_form: true,
+        ..Default::default()
+    };
     let mut pf = filter(50, true);
     pf.run(&model, &data, 1).unwrap();
-    let err = FfbsiReject {
+    let smoother = FfbsiReject {
         paths: 40,
         max_trials: None,
         parallel: false,
-    }
-    .trajectories(&model, pf.history().unwrap(), &data, 1)
-    .unwrap_err();
+    };
+    let err = smoother
+        .trajectories(&model, pf.history().unwrap(), &data, 1)
+        .unwrap_err();
     // the first step walked back is t = 2; every trial's log-density there is above -1
     // for the nearby particles, so some trial of the block sees it (the density's
     // largest value is -ln(2 pi 0.01) / 2)
@@ -264,6 +272,14 @@ fn a_transition_bound_below_the_density_is_a_typed_error() {
         }
         other => panic!("{other:?}"),
     }
+    // with the scalar form each row is bounded by its own exact maximum, and the same
+    // history smooths
+    let scalar = BoundedSensor::default();
+    assert!(
+        smoother
+            .trajectories(&scalar, pf.history().unwrap(), &data, 1)
+            .is_ok()
+    );
 }
 
 #[test]

@@ -54,6 +54,38 @@ pub(crate) fn means_usable(means: &[f64]) -> bool {
     !means.iter().any(|m| m.is_nan())
 }
 
+/// For each `next_states[k]` of a block, `max[k] = max_i log f(next_states[k] | mean_i)`
+/// from the nearest of `means` (free of NaN, see [`means_usable`]); an error names the
+/// row whose state is NaN or whose maximum is not finite.
+#[inline(always)]
+pub(crate) fn row_maxima(
+    kernel: ScalarGaussianKernel,
+    means: &[f64],
+    next_states: &[f64],
+    t: usize,
+    max: &mut [f64],
+) -> Result<(), SmcError> {
+    let rows = next_states.len();
+    debug_assert!(rows <= PATH_BLOCK, "a block has at most PATH_BLOCK paths");
+    if let Some(k) = next_states.iter().position(|x| x.is_nan()) {
+        return Err(backward_error(DrawFailure::Invalid, t, k));
+    }
+    let mut nearest = [0.0; PATH_BLOCK];
+    nearest_distances(means, next_states, &mut nearest[..rows]);
+    for k in 0..rows {
+        // the same number as the largest of the row's log-densities
+        let row_max = kernel.log_density_at(nearest[k]);
+        if row_max == f64::NEG_INFINITY {
+            return Err(backward_error(DrawFailure::Degenerate, t, k));
+        }
+        if row_max.is_nan() || row_max == f64::INFINITY {
+            return Err(backward_error(DrawFailure::Invalid, t, k));
+        }
+        max[k] = row_max;
+    }
+    Ok(())
+}
+
 /// One backward step of a block: for each `next_states[k]`, draws a candidate index
 /// with probability ∝ `f(next_states[k] | candidate)` and writes `pick(index)` to
 /// `out[k]`. `means` must be free of NaN (see [`means_usable`]); `row` is scratch for
@@ -74,24 +106,8 @@ pub(crate) fn draw_block(
 ) -> Result<(), SmcError> {
     let m = means.len();
     let rows = next_states.len();
-    debug_assert!(rows <= PATH_BLOCK, "a block has at most PATH_BLOCK paths");
-    if let Some(k) = next_states.iter().position(|x| x.is_nan()) {
-        return Err(backward_error(DrawFailure::Invalid, t, k));
-    }
-    let mut nearest = [0.0; PATH_BLOCK];
-    nearest_distances(means, next_states, &mut nearest[..rows]);
     let mut max = [0.0; PATH_BLOCK];
-    for k in 0..rows {
-        // the same number as the largest of the row's log-densities
-        let row_max = kernel.log_density_at(nearest[k]);
-        if row_max == f64::NEG_INFINITY {
-            return Err(backward_error(DrawFailure::Degenerate, t, k));
-        }
-        if row_max.is_nan() || row_max == f64::INFINITY {
-            return Err(backward_error(DrawFailure::Invalid, t, k));
-        }
-        max[k] = row_max;
-    }
+    row_maxima(kernel, means, next_states, t, &mut max[..rows])?;
     let open = draw_in_rounds(
         trials,
         rng,

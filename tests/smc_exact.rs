@@ -191,7 +191,8 @@ fn rejection_ffbsi_and_exact_ffbsi_draw_the_same_marginals() {
     let (_, y) = lgss_data(100, 31);
     let model = LinearGaussianSmc::new(&lgss()).unwrap();
     let data = Series::new(&y, 1).unwrap();
-    let mut pf = stored_filter(300);
+    // (at most 256 particles: each path's envelope is its own maximum)
+    let mut pf = stored_filter(200);
     pf.run(&model, &data, 5).unwrap();
     let history = pf.history().unwrap();
     let k = 2000;

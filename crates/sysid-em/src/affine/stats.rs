@@ -66,8 +66,10 @@ pub struct StatisticsCollector<'a, A> {
     /// The step's `[alpha; x_{t+1}]` by component: column `i` holds component `i` of
     /// every path.
     columns: Vec<f64>,
+    /// The step's sums over the paths of the products of the columns (upper triangle,
+    /// column-major) and of each column (the first `r` are the regressors' sums).
     step_sum: Vec<f64>,
-    alpha_sum: Vec<f64>,
+    column_sums: Vec<f64>,
     moments: PathMoments,
 }
 
@@ -81,7 +83,7 @@ impl<'a, A: AffineModel> StatisticsCollector<'a, A> {
             stats: AffineStatistics::zeros(r, n, p),
             columns: Vec::new(),
             step_sum: vec![0.0; (r + n) * (r + n)],
-            alpha_sum: vec![0.0; r + n],
+            column_sums: vec![0.0; r + n],
             moments: PathMoments::default(),
         }
     }
@@ -133,15 +135,8 @@ impl<A: AffineModel> Kernel for StepKernel<'_, '_, '_, A> {
 
     #[inline(always)]
     fn run(self) {
-        let StepKernel {
-            collector,
-            t,
-            states,
-            next,
-            state_dim,
-            weight,
-        } = self;
-        collector.accumulate(t, states, next, state_dim, weight);
+        self.collector
+            .accumulate(self.t, self.states, self.next, self.state_dim, self.weight);
     }
 }
 
@@ -179,7 +174,7 @@ impl<A: AffineModel> StatisticsCollector<'_, A> {
             paths,
             k,
             &mut self.step_sum,
-            &mut self.alpha_sum,
+            &mut self.column_sums,
         );
         let total_weight = weight * paths as f64;
         if t == 0 {
@@ -213,7 +208,7 @@ impl<A: AffineModel> StatisticsCollector<'_, A> {
             }
             for (jy, &yj) in y.iter().enumerate() {
                 let column = &mut output[(r + jy) * out_k..(r + jy + 1) * out_k];
-                for (c, &a) in column[..r].iter_mut().zip(&self.alpha_sum[..r]) {
+                for (c, &a) in column[..r].iter_mut().zip(&self.column_sums[..r]) {
                     *c += weight * a * yj;
                 }
                 for (c, &yi) in column[r..=r + jy].iter_mut().zip(y) {

@@ -8,7 +8,7 @@
 //! | [`Genealogy`] | the filter's ancestor of the path | O(T K) | nothing |
 //! | [`Ffbsi`] | `i` with prob. ∝ `W_t^i f(x~_{t+1} \| x_t^i)` | O(T K M) | [`TransitionDensity`] |
 //! | [`Tanizaki`] | as FFBSi, over the equally weighted resampled cloud, K = M (by rejection against the row maximum, then exactly) | O(T M²) | [`TransitionDensity`] |
-//! | [`FfbsiReject`] | propose `i ~ Cat(W_t)`, accept w.p. `f / c` (`c` the row's own maximum for scalar Gaussian transitions, else the model's bound); exact draw after `max_trials` | expected O(T K) | [`TransitionBound`] |
+//! | [`FfbsiReject`] | propose `i ~ Cat(W_t)`, accept w.p. `f / c` (`c` the row's own maximum for scalar Gaussian transitions and M <= 256, else the model's bound); exact draw after `max_trials` | expected O(T K) | [`TransitionBound`] |
 //!
 //! Paths are drawn in blocks of [`PATH_BLOCK`]; block `b` uses the random stream
 //! `(seed, b)`, so results do not depend on the thread count. The blocks walk back in
@@ -253,7 +253,8 @@ impl<M: TransitionDensity + Sync> Smoother<M> for Tanizaki {
 ///
 /// Proposals come from `Cat(W_t)` and are accepted with probability `f / c`: `c` is
 /// each path's own largest transition density (from the nearest transition mean) for
-/// scalar Gaussian transitions, else the model's [`TransitionBound`].
+/// scalar Gaussian transitions with at most 256 particles, else the model's
+/// [`TransitionBound`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FfbsiReject {
     /// Number of paths K.

@@ -34,7 +34,7 @@ use crate::{History, Series, SmcError};
 
 /// The most filter particles for which each path's envelope is its own maximum: the
 /// nearest-mean pass costs O(M) per path, which at M = 50 (seed 000's benchmark) is
-/// repaid by the trials it saves (1000 EM iterations: 2.9-5.4 s against 3.8-7.0 s),
+/// repaid by the trials it saves (1000 EM iterations: 2.9-5.8 s against 3.8-7.0 s),
 /// but not at M = 1000 (the `ffbsi_reject` benchmark: 24 ms against 18 ms, 11 % fewer
 /// trials).
 const ROW_BOUND_MAX_PARTICLES: usize = 256;

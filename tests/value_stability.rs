@@ -101,8 +101,10 @@ const PINNED_NLBENCH: [u64; 4] = [
     // in bulk, a run per round (`trial_numbers`), and FFBSi-reject's alias table is
     // built by the sweep (another table for the same weights); FFBSi-reject re-pinned
     // 2026-11-23 on purpose: for scalar Gaussian transitions each path's envelope is
-    // its own maximum (the nearest transition mean), not the model's global bound
+    // its own maximum (the nearest transition mean), not the model's global bound;
+    // Tanizaki re-pinned 2026-11-24 on purpose: where the means spread wider than a
+    // window, each path proposes from its window of sorted means (`smoother::window`)
     0xc04a3f96f4c3d947,
-    0x3fe943ba0f60d29d,
+    0x3fe97b11a8af1e8d,
     0x3feee76357d29293,
 ];

@@ -6,6 +6,7 @@ use super::SmootherStats;
 use super::backward::{DispatchedStep, PATH_BLOCK, backward_error, gather};
 use super::nearest;
 use super::rounds::{draw_in_rounds, uniform_index};
+use super::window::{BlockProposals, MeanBuckets};
 use crate::model::{ScalarGaussianKernel, TransitionDensity};
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
@@ -45,6 +46,11 @@ pub(crate) struct ExactStep<'a, M> {
     /// transitions, whose transition means `means` and `kernel` are).
     pub cloud_step: Option<usize>,
     pub means: Vec<f64>,
+    /// `means` sorted into buckets, for the rows' proposal windows.
+    pub buckets: MeanBuckets,
+    /// Whether `buckets` holds the means of `cloud_step` (see [`MeanBuckets::build`]).
+    pub windowed: bool,
+    pub proposals: BlockProposals,
     pub kernel: Option<ScalarGaussianKernel>,
     pub stats: SmootherStats,
 }
@@ -62,6 +68,9 @@ impl<'a, M: TransitionDensity> ExactStep<'a, M> {
             gathered: Vec::new(),
             cloud_step: None,
             means: Vec::new(),
+            buckets: MeanBuckets::default(),
+            windowed: false,
+            proposals: BlockProposals::default(),
             kernel: None,
             stats: SmootherStats::default(),
         }
@@ -102,19 +111,25 @@ impl<M: TransitionDensity> DispatchedStep for ExactStep<'_, M> {
             self.history.states(t)
         };
         if let (true, Some(trials)) = (resampled && n == 1, self.rejection_trials) {
-            // equally weighted candidates: bound each row by its nearest mean
+            // equally weighted candidates: propose from each row's window of means
             if fresh {
                 self.kernel = self
                     .model
                     .scalar_gaussian_means(t, self.data.input(t), cloud, &mut self.means)
                     .filter(ScalarGaussianKernel::is_proper)
                     .filter(|_| nearest::means_usable(&self.means));
+                self.windowed = match self.kernel {
+                    Some(kernel) => self.buckets.build(&self.means, kernel),
+                    None => false,
+                };
             }
             if let Some(kernel) = self.kernel {
                 let ancestors = self.history.ancestors(t + 1);
                 return nearest::draw_block(
                     kernel,
                     &self.means,
+                    self.windowed.then_some(&self.buckets),
+                    &mut self.proposals,
                     next_states,
                     trials,
                     t,
@@ -175,7 +190,7 @@ impl<M: TransitionDensity> DispatchedStep for ExactStep<'_, M> {
         let open = draw_in_rounds(
             trials,
             rng,
-            |u| uniform_index(u, m),
+            |_, u| uniform_index(u, m),
             |k, i| matrix[k * m + i] - max[k],
             out,
         );

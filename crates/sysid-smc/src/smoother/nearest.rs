@@ -4,48 +4,61 @@
 //! For equally weighted candidates `i` with transition means `m_i` and
 //! `f(x~ | x_i) = N(x~; m_i, v)`, the largest candidate density belongs to the mean
 //! nearest to `x~`, found in one vectorisable pass over the means. Each trial proposes
-//! `i ~ U{1..M}` and accepts it with probability `f_i / max_j f_j` (tested as
-//! `l_i - max > -E`, `E ~ Exp(1)`), evaluating that single `l_i`; after `trials`
-//! rejections the row is evaluated in full and drawn from exactly. The random numbers
-//! used, the comparisons and the fallback are those of the general kernel
-//! ([`super::exact`]), and `max_j l_j` is the same number (the log-density falls
-//! monotonically in `|x~ - m_i|`, also after rounding), so both give the same draws.
+//! a candidate and accepts it with probability `f_i / g_i` for an envelope `g >= f`
+//! (tested as `l_i - log g_i > -E`, `E ~ Exp(1)`), evaluating that single `l_i`; after
+//! `trials` rejections the row is evaluated in full and drawn from exactly. Where the
+//! step's means spread wider than a window, each row proposes from its window of
+//! sorted means ([`super::window`]); elsewhere the proposal is uniform and
+//! `g_i = max_j f_j`, with the random numbers, comparisons and fallback of the general
+//! kernel ([`super::exact`]) and the same `max_j l_j` (the log-density falls
+//! monotonically in `|x~ - m_i|`, also after rounding), so both give the same draws
+//! there.
 //!
 //! # Complexity
 //! Per draw O(M / 8) vector operations for the nearest mean, plus about
-//! `M max f / sum f` single evaluations, plus O(M) for the rare fallbacks; the general
-//! kernel evaluates all `M` densities of every draw.
+//! `sum g / sum f` single evaluations, plus O(M) for the rare fallbacks; O(M) per step
+//! for the windows' sort. The general kernel evaluates all `M` densities of every draw.
 
 use rand::RngExt;
 
 use super::SmootherStats;
 use super::backward::{PATH_BLOCK, backward_error};
 use super::rounds::{draw_in_rounds, uniform_index};
+use super::window::{BlockProposals, MeanBuckets};
 use crate::SmcError;
 use crate::model::ScalarGaussianKernel;
 use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{DrawFailure, draw_from_weights};
 
-/// For each `x_k` of `points`, the smallest `|x_k - m_i|` over `means` into
-/// `nearest[k]` (the caller has checked both for NaN). Points are the inner loop, a
-/// whole block at a time (four vectors of eight): no horizontal reduction, and four
-/// independent dependency chains per mean instead of one.
+/// For each `x_k` of `points` (at most [`PATH_BLOCK`]), the smallest `|x_k - m_i|`
+/// over `means` into `nearest[k]` (the caller has checked both for NaN). Points are the
+/// inner loop, in as few vectors of eight as hold them: no horizontal reduction, and
+/// up to four independent dependency chains per mean instead of one.
 #[inline(always)]
 fn nearest_distances(means: &[f64], points: &[f64], nearest: &mut [f64]) {
-    const LANES: usize = PATH_BLOCK;
-    for (xs, best) in points.chunks(LANES).zip(nearest.chunks_mut(LANES)) {
-        let mut x = [0.0; LANES];
-        x[..xs.len()].copy_from_slice(xs);
-        let mut b = [f64::INFINITY; LANES];
-        for &m in means {
-            for (bk, &xk) in b.iter_mut().zip(&x) {
-                let d = (xk - m).abs();
-                *bk = if d < *bk { d } else { *bk };
-            }
-        }
-        best.copy_from_slice(&b[..xs.len()]);
+    match points.len() {
+        0..=8 => nearest_in_lanes::<8>(means, points, nearest),
+        9..=16 => nearest_in_lanes::<16>(means, points, nearest),
+        17..=24 => nearest_in_lanes::<24>(means, points, nearest),
+        _ => nearest_in_lanes::<PATH_BLOCK>(means, points, nearest),
     }
+}
+
+/// [`nearest_distances`] with `LANES >= points.len()` lanes.
+#[inline(always)]
+fn nearest_in_lanes<const LANES: usize>(means: &[f64], points: &[f64], nearest: &mut [f64]) {
+    let rows = points.len();
+    let mut x = [0.0; LANES];
+    x[..rows].copy_from_slice(points);
+    let mut b = [f64::INFINITY; LANES];
+    for &m in means {
+        for (bk, &xk) in b.iter_mut().zip(&x) {
+            let d = (xk - m).abs();
+            *bk = if d < *bk { d } else { *bk };
+        }
+    }
+    nearest[..rows].copy_from_slice(&b[..rows]);
 }
 
 /// Whether a step's transition means can go to [`draw_block`]: none is NaN (else the
@@ -55,8 +68,9 @@ pub(crate) fn means_usable(means: &[f64]) -> bool {
 }
 
 /// For each `next_states[k]` of a block, `max[k] = max_i log f(next_states[k] | mean_i)`
-/// from the nearest of `means` (free of NaN, see [`means_usable`]); an error names the
-/// row whose state is NaN or whose maximum is not finite.
+/// from the nearest of `means` (free of NaN, see [`means_usable`]), at the distance
+/// `nearest[k]`; an error names the row whose state is NaN or whose maximum is not
+/// finite.
 #[inline(always)]
 pub(crate) fn row_maxima(
     kernel: ScalarGaussianKernel,
@@ -64,13 +78,13 @@ pub(crate) fn row_maxima(
     next_states: &[f64],
     t: usize,
     max: &mut [f64],
+    nearest: &mut [f64],
 ) -> Result<(), SmcError> {
     let rows = next_states.len();
     debug_assert!(rows <= PATH_BLOCK, "a block has at most PATH_BLOCK paths");
     if let Some(k) = next_states.iter().position(|x| x.is_nan()) {
         return Err(backward_error(DrawFailure::Invalid, t, k));
     }
-    let mut nearest = [0.0; PATH_BLOCK];
     nearest_distances(means, next_states, &mut nearest[..rows]);
     for k in 0..rows {
         // the same number as the largest of the row's log-densities
@@ -86,15 +100,20 @@ pub(crate) fn row_maxima(
     Ok(())
 }
 
-/// One backward step of a block: for each `next_states[k]`, draws a candidate index
-/// with probability ∝ `f(next_states[k] | candidate)` and writes `pick(index)` to
-/// `out[k]`. `means` must be free of NaN (see [`means_usable`]); `row` is scratch for
-/// the fallback.
+/// One backward step of a block among equally weighted candidates: for each
+/// `next_states[k]`, draws a candidate with probability ∝ `f(next_states[k] | candidate)`
+/// and writes `pick(candidate)` to `out[k]`. `means` are the candidates' transition
+/// means (free of NaN, see [`means_usable`]). Each row proposes up to `trials` times,
+/// then draws exactly: from its window when `buckets` holds the means sorted (see
+/// [`super::window`]; `proposals` is scratch for it), else uniformly. `row` is scratch
+/// for the exact draw.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn draw_block(
     kernel: ScalarGaussianKernel,
     means: &[f64],
+    buckets: Option<&MeanBuckets>,
+    proposals: &mut BlockProposals,
     next_states: &[f64],
     trials: usize,
     t: usize,
@@ -107,14 +126,41 @@ pub(crate) fn draw_block(
     let m = means.len();
     let rows = next_states.len();
     let mut max = [0.0; PATH_BLOCK];
-    row_maxima(kernel, means, next_states, t, &mut max[..rows])?;
-    let open = draw_in_rounds(
-        trials,
-        rng,
-        |u| uniform_index(u, m),
-        |k, i| kernel.log_density(means[i], next_states[k]) - max[k],
-        out,
-    );
+    let mut nearest = [0.0; PATH_BLOCK];
+    // the candidates as the trials see them: sorted, or as given
+    let candidates = buckets.map_or(means, MeanBuckets::sorted);
+    let distinct = buckets.map_or(means, MeanBuckets::distinct);
+    row_maxima(
+        kernel,
+        distinct,
+        next_states,
+        t,
+        &mut max[..rows],
+        &mut nearest[..rows],
+    )?;
+    let open = match buckets {
+        Some(buckets) => {
+            proposals.prepare(buckets, kernel, next_states, &nearest, &max);
+            let proposals = &*proposals;
+            draw_in_rounds(
+                trials,
+                rng,
+                |k, u| proposals.propose(k, u),
+                |k, pos| {
+                    kernel.log_density(candidates[pos], next_states[k])
+                        - proposals.log_bound(k, pos)
+                },
+                out,
+            )
+        }
+        None => draw_in_rounds(
+            trials,
+            rng,
+            |_, u| uniform_index(u, m),
+            |k, i| kernel.log_density(candidates[i], next_states[k]) - max[k],
+            out,
+        ),
+    };
     stats.trials += open.trials;
     stats.density_evaluations += rows as u64 + open.trials;
     for k in open.rows() {
@@ -122,13 +168,26 @@ pub(crate) fn draw_block(
         stats.fallbacks += 1;
         stats.density_evaluations += m as u64;
         row.clear();
-        row.extend(means.iter().map(|&mean| kernel.log_density(mean, next)));
+        row.extend(
+            candidates
+                .iter()
+                .map(|&mean| kernel.log_density(mean, next)),
+        );
         exp_shifted_sum(row, max[k]);
         out[k] = draw_from_weights(row, rng.random())
             .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
     }
-    for slot in out.iter_mut() {
-        *slot = pick(*slot);
+    match buckets {
+        Some(buckets) => {
+            for slot in out.iter_mut() {
+                *slot = pick(buckets.candidate(*slot));
+            }
+        }
+        None => {
+            for slot in out.iter_mut() {
+                *slot = pick(*slot);
+            }
+        }
     }
     Ok(())
 }
@@ -176,6 +235,71 @@ mod tests {
                 .map(|&m| kernel.log_density(m, next))
                 .fold(f64::NEG_INFINITY, f64::max);
             assert_eq!(kernel.log_density_at(nearest).to_bits(), row_max.to_bits());
+        }
+    }
+
+    /// Each row's draws, windowed or uniform, with a trial cap that sends some rows to
+    /// the exact draw, land on the candidates with their exact probabilities
+    /// `f_i / sum_j f_j` (within 4.5 binomial standard errors per candidate). The means
+    /// put a group of candidates just outside a window and repeat some (as a resampled
+    /// cloud does), so both parts of the envelope carry visible mass.
+    #[test]
+    fn block_draws_have_the_exact_probabilities() {
+        let kernel = ScalarGaussianKernel::with_variance(0.01);
+        let mut means = vec![0.0, 0.0, 0.0, -0.1];
+        means.extend((0..20).map(|i| 0.30 + 0.015 * i as f64));
+        means.extend([5.0; 10]);
+        let m = means.len();
+        let mut buckets = MeanBuckets::default();
+        assert!(buckets.build(&means, kernel));
+        let mut proposals = BlockProposals::default();
+        let mut row = Vec::new();
+        for windowed in [true, false] {
+            for (x, trials) in [(0.0, 8), (0.0, 2), (0.45, 8), (2.5, 8), (5.02, 3)] {
+                let next = [x; PATH_BLOCK];
+                let mut counts = vec![0usize; m];
+                let mut stats = SmootherStats::default();
+                let blocks = 3000;
+                for block in 0..blocks {
+                    let mut out = [0usize; PATH_BLOCK];
+                    draw_block(
+                        kernel,
+                        &means,
+                        windowed.then_some(&buckets),
+                        &mut proposals,
+                        &next,
+                        trials,
+                        0,
+                        &mut out,
+                        |i| i,
+                        &mut crate::stream(77, block),
+                        &mut row,
+                        &mut stats,
+                    )
+                    .unwrap();
+                    for &i in &out {
+                        counts[i] += 1;
+                    }
+                }
+                let f: Vec<f64> = means
+                    .iter()
+                    .map(|&mu| kernel.log_density(mu, x).exp())
+                    .collect();
+                let total: f64 = f.iter().sum();
+                let draws = (blocks as usize * PATH_BLOCK) as f64;
+                for (i, &c) in counts.iter().enumerate() {
+                    let p = f[i] / total;
+                    let se = (p * (1.0 - p) / draws).sqrt();
+                    let freq = c as f64 / draws;
+                    assert!(
+                        (freq - p).abs() <= 4.5 * se + 1e-12,
+                        "windowed {windowed}, x {x}, candidate {i}: {freq} vs {p}"
+                    );
+                }
+                if (x, trials) == (0.0, 2) {
+                    assert!(stats.fallbacks > 0, "{stats:?}");
+                }
+            }
         }
     }
 }

@@ -154,12 +154,20 @@ impl<M: TransitionBound> DispatchedStep for RejectStep<'_, M> {
             Some(kernel) if row_bounds => {
                 // each row's own maximum: exact, so no density can exceed it
                 self.stats.density_evaluations += out.len() as u64;
-                let mut row_max = [0.0; PATH_BLOCK];
-                nearest::row_maxima(kernel, means, next_states, t, &mut row_max[..out.len()])?;
+                let (mut row_max, mut distance) = ([0.0; PATH_BLOCK], [0.0; PATH_BLOCK]);
+                let rows = out.len();
+                nearest::row_maxima(
+                    kernel,
+                    means,
+                    next_states,
+                    t,
+                    &mut row_max[..rows],
+                    &mut distance[..rows],
+                )?;
                 draw_in_rounds(
                     self.max_trials,
                     rng,
-                    |u| proposal.draw(u),
+                    |_, u| proposal.draw(u),
                     |k, i| kernel.log_density(means[i], next_states[k]) - row_max[k],
                     out,
                 )
@@ -167,14 +175,14 @@ impl<M: TransitionBound> DispatchedStep for RejectStep<'_, M> {
             Some(kernel) => draw_in_rounds(
                 self.max_trials,
                 rng,
-                |u| proposal.draw(u),
+                |_, u| proposal.draw(u),
                 |k, i| ratio(kernel.log_density(means[i], next_states[k])),
                 out,
             ),
             None => draw_in_rounds(
                 self.max_trials,
                 rng,
-                |u| proposal.draw(u),
+                |_, u| proposal.draw(u),
                 |k, i| {
                     ratio(log_f(
                         &states[i * n..(i + 1) * n],

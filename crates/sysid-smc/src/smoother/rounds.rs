@@ -39,7 +39,7 @@ impl OpenRows {
 }
 
 /// Up to `trials` rejection trials for each of the `chosen.len() <= PATH_BLOCK` rows:
-/// candidates from `propose` (given a uniform in [0, 1)), accepted with probability
+/// candidates from `propose` (given the row and a uniform in [0, 1)), accepted with probability
 /// `exp(log_ratio(row, candidate))`, into `chosen[row]`. Returns the rows left open
 /// (their `chosen` entries are the last rejected candidates, for the caller to
 /// overwrite).
@@ -47,7 +47,7 @@ impl OpenRows {
 pub(crate) fn draw_in_rounds(
     trials: usize,
     rng: &mut Rng,
-    propose: impl Fn(f64) -> usize,
+    propose: impl Fn(usize, f64) -> usize,
     mut log_ratio: impl FnMut(usize, usize) -> f64,
     chosen: &mut [usize],
 ) -> OpenRows {
@@ -75,8 +75,8 @@ pub(crate) fn draw_in_rounds(
         // dependency, and no trial's whole chain (proposal, density, test) sits on the
         // count of open rows.
         let (uniforms, exponentials) = numbers.take(rng, len);
-        for (candidate, &u) in candidates[..len].iter_mut().zip(uniforms) {
-            *candidate = propose(u);
+        for ((candidate, &u), &k) in candidates[..len].iter_mut().zip(uniforms).zip(&open.rows) {
+            *candidate = propose(usize::from(k), u);
         }
         for j in 0..len {
             let k = usize::from(open.rows[j]);
@@ -117,7 +117,7 @@ mod tests {
         let rounds = draw_in_rounds(
             3,
             &mut stream(5, 1),
-            |u| uniform_index(u, m),
+            |_, u| uniform_index(u, m),
             log_ratio,
             &mut drawn,
         );
@@ -161,7 +161,7 @@ mod tests {
             let open = draw_in_rounds(
                 10_000,
                 &mut stream(9, block),
-                |u| uniform_index(u, m),
+                |_, u| uniform_index(u, m),
                 |_, i| f64::ln(ratio[i]),
                 &mut drawn,
             );

@@ -125,7 +125,7 @@ const FLOORS: &[Floor] = &[
         select: &[("M", "50")],
         field: "ms_median",
         floor: 1.0,
-        why: "5e4 draws x ~20 ns: 3 rejection trials (a bulk uniform-exponential pair each), the nearest-mean pass, 7.6 % fallbacks of 50 vectorised exps",
+        why: "5e4 draws x ~20 ns: about 2 rejection trials (a bulk uniform-exponential pair each) from a window of sorted means where they spread, the nearest-mean pass, 1-2 % fallbacks of 50 vectorised exps",
     },
     Floor {
         task: "ffbsi_reject",

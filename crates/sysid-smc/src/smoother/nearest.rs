@@ -177,17 +177,9 @@ pub(crate) fn draw_block(
         out[k] = draw_from_weights(row, rng.random())
             .ok_or_else(|| backward_error(DrawFailure::Invalid, t, k))?;
     }
-    match buckets {
-        Some(buckets) => {
-            for slot in out.iter_mut() {
-                *slot = pick(buckets.candidate(*slot));
-            }
-        }
-        None => {
-            for slot in out.iter_mut() {
-                *slot = pick(*slot);
-            }
-        }
+    // sorted positions back to candidates
+    for slot in out.iter_mut() {
+        *slot = pick(buckets.map_or(*slot, |b| b.candidate(*slot)));
     }
     Ok(())
 }

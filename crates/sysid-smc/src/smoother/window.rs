@@ -65,7 +65,7 @@ pub(crate) struct MeanBuckets {
     sorted: Vec<f64>,
     /// `sorted` without repeats of a value next to itself.
     distinct: Vec<f64>,
-    /// The buckets of the means in their given order, while sorting.
+    /// The buckets of the means in their given order (scratch of the sort).
     scratch: Vec<u32>,
 }
 
@@ -100,16 +100,14 @@ impl MeanBuckets {
             0.0
         };
         self.last_bucket = buckets - 1;
-        // each mean's bucket, in one vectorisable pass
-        let mut bucket_of = std::mem::take(&mut self.order);
-        bucket_of.resize(m, 0);
-        for (b, &x) in bucket_of.iter_mut().zip(means) {
-            *b = self.bucket(x) as u32;
-        }
-        self.order = bucket_of;
+        // each mean's bucket, then the counts of the buckets as running sums: `starts[b]`
+        // is bucket `b`'s first sorted position
+        let mut bucket_of = std::mem::take(&mut self.scratch);
+        bucket_of.clear();
+        bucket_of.extend(means.iter().map(|&x| self.bucket(x) as u32));
         self.starts.clear();
         self.starts.resize(buckets + 1, 0);
-        for &b in &self.order {
+        for &b in &bucket_of {
             self.starts[b as usize + 1] += 1;
         }
         let mut total = 0;
@@ -117,22 +115,19 @@ impl MeanBuckets {
             total += *start;
             *start = total;
         }
-        // scatter, stably: `cursor[b]` is bucket `b`'s next free position
+        // scatter, stably, with `starts[b]` as bucket `b`'s next free position; after
+        // it each holds the start of the next bucket: shift them back
+        self.order.resize(m, 0);
         self.sorted.resize(m, 0.0);
-        let mut cursor = std::mem::take(&mut self.starts);
-        let mut sorted_order = std::mem::take(&mut self.scratch);
-        sorted_order.resize(m, 0);
-        for (i, (&b, &x)) in self.order.iter().zip(means).enumerate() {
-            let slot = &mut cursor[b as usize];
-            sorted_order[*slot as usize] = i as u32;
+        for (i, (&b, &x)) in bucket_of.iter().zip(means).enumerate() {
+            let slot = &mut self.starts[b as usize];
+            self.order[*slot as usize] = i as u32;
             self.sorted[*slot as usize] = x;
             *slot += 1;
         }
-        // after the scatter bucket `b`'s cursor is the start of `b + 1`: shift back
-        cursor.copy_within(0..buckets, 1);
-        cursor[0] = 0;
-        self.starts = cursor;
-        self.scratch = std::mem::replace(&mut self.order, sorted_order);
+        self.starts.copy_within(0..buckets, 1);
+        self.starts[0] = 0;
+        self.scratch = bucket_of;
         // (copies of a particle are neighbours in the candidates' order, which the
         // stable sort keeps)
         self.distinct.clear();

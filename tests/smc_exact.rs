@@ -416,6 +416,52 @@ fn tanizaki_by_windows_of_means_and_by_the_general_kernel_draw_the_same_marginal
     }
 }
 
+impl sysid::smc::TransitionBound for WithoutScalarMeans {
+    fn log_transition_bound(&self, t: usize, u: &[f64]) -> f64 {
+        self.0.log_transition_bound(t, u)
+    }
+}
+
+#[test]
+fn rejection_ffbsi_by_windows_of_means_and_exact_ffbsi_draw_the_same_marginals() {
+    // nlbench's scalar form sends rejection FFBSi down its windowed route at the steps
+    // whose means spread (weighted candidates, each row proposing from its window of
+    // sorted means); the exact FFBSi evaluates every candidate of every draw.
+    use sysid::smc::TransitionBound;
+    let model = Nlbench::truth();
+    let sim = model.simulate(300, 8);
+    let data = Series::new(&sim.outputs, 1).unwrap();
+    let mut pf = stored_filter(50);
+    pf.run(&model, &data, 5).unwrap();
+    let history = pf.history().unwrap();
+    let paths = 2000;
+    let times = [0, 75, 150, 225, 299];
+    let (reference, _) = Ffbsi {
+        paths,
+        parallel: false,
+    }
+    .trajectories(&model, history, &data, 1)
+    .unwrap();
+    // the model's own bound (the general route) for comparison
+    let general = WithoutScalarMeans(Nlbench::truth());
+    assert!(general.log_transition_bound(0, &[]).is_finite());
+    for max_trials in [None, Some(1)] {
+        let smoother = FfbsiReject {
+            paths,
+            max_trials,
+            parallel: false,
+        };
+        let (windowed, stats) = smoother.trajectories(&model, history, &data, 2).unwrap();
+        let (_, general_stats) = smoother.trajectories(&general, history, &data, 3).unwrap();
+        assert!(stats.fallbacks > 0, "{stats:?}");
+        assert!(
+            stats.trials + stats.fallbacks < general_stats.trials + general_stats.fallbacks,
+            "{stats:?} vs {general_stats:?}"
+        );
+        assert_same_marginals(&reference, &windowed, &times);
+    }
+}
+
 /// Everything a filter run leaves behind, as bits.
 fn filter_bits(pf: &ParticleFilter, loglik: f64, resampled: usize) -> Vec<u64> {
     let mut bits = vec![loglik.to_bits(), resampled as u64];

@@ -103,8 +103,10 @@ const PINNED_NLBENCH: [u64; 4] = [
     // 2026-11-23 on purpose: for scalar Gaussian transitions each path's envelope is
     // its own maximum (the nearest transition mean), not the model's global bound;
     // Tanizaki re-pinned 2026-11-24 on purpose: where the means spread wider than a
-    // window, each path proposes from its window of sorted means (`smoother::window`)
+    // window, each path proposes from its window of sorted means (`smoother::window`);
+    // FFBSi-reject re-pinned 2026-11-24 on purpose: the same windows, each candidate
+    // weighted by its filter weight (`nearest::draw_weighted_block`)
     0xc04a3f96f4c3d947,
     0x3fe97b11a8af1e8d,
-    0x3feee76357d29293,
+    0x3fef42cd59d4e8e4, // 0.9769045595669721
 ];

@@ -23,7 +23,7 @@ use rand::RngExt;
 
 use super::SmootherStats;
 use super::backward::{PATH_BLOCK, backward_error};
-use super::rounds::{draw_in_rounds, uniform_index};
+use super::rounds::{OpenRows, draw_in_rounds, uniform_index};
 use super::window::{BlockProposals, MeanBuckets};
 use crate::SmcError;
 use crate::model::ScalarGaussianKernel;
@@ -140,7 +140,7 @@ pub(crate) fn draw_block(
     )?;
     let open = match buckets {
         Some(buckets) => {
-            proposals.prepare(buckets, kernel, next_states, &nearest, &max);
+            proposals.prepare(buckets, kernel, next_states, &nearest, &max, false);
             let proposals = &*proposals;
             draw_in_rounds(
                 trials,
@@ -182,6 +182,60 @@ pub(crate) fn draw_block(
         *slot = pick(buckets.map_or(*slot, |b| b.candidate(*slot)));
     }
     Ok(())
+}
+
+/// The rejection trials of a block among weighted candidates: for each
+/// `next_states[k]`, up to `trials` proposals from its window of `buckets` (the means
+/// sorted, with the weights' running sums from [`MeanBuckets::cumulate_weights`];
+/// `proposals` is scratch), each accepted with probability `f_i / g_i`, so that an
+/// accepted candidate has probability ∝ `w_i f(next_states[k] | candidate i)`.
+/// Writes the candidates (not sorted positions) to `out` and returns the rows left
+/// open, for the caller's exact draw; an error names a row whose state is NaN or whose
+/// largest density is not finite.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn draw_weighted_block(
+    kernel: ScalarGaussianKernel,
+    buckets: &MeanBuckets,
+    proposals: &mut BlockProposals,
+    next_states: &[f64],
+    trials: usize,
+    t: usize,
+    out: &mut [usize],
+    rng: &mut Rng,
+) -> Result<OpenRows, SmcError> {
+    let rows = next_states.len();
+    let (mut max, mut nearest) = ([0.0; PATH_BLOCK], [0.0; PATH_BLOCK]);
+    row_maxima(
+        kernel,
+        buckets.distinct(),
+        next_states,
+        t,
+        &mut max[..rows],
+        &mut nearest[..rows],
+    )?;
+    proposals.prepare(buckets, kernel, next_states, &nearest, &max, true);
+    let proposals = &*proposals;
+    let (sorted, cumulative) = (buckets.sorted(), buckets.cumulative());
+    let open = draw_in_rounds(
+        trials,
+        rng,
+        |k, u| proposals.propose_weighted(k, u, cumulative),
+        |k, pos| {
+            // (a position of zero weight is proposed only by rounding)
+            if cumulative[pos + 1] > cumulative[pos] {
+                kernel.log_density(sorted[pos], next_states[k]) - proposals.log_bound(k, pos)
+            } else {
+                f64::NEG_INFINITY
+            }
+        },
+        out,
+    );
+    // sorted positions back to candidates (the open rows' are the caller's to draw)
+    for slot in out.iter_mut() {
+        *slot = buckets.candidate(*slot);
+    }
+    Ok(open)
 }
 
 #[cfg(test)]
@@ -277,20 +331,95 @@ mod tests {
                     .iter()
                     .map(|&mu| kernel.log_density(mu, x).exp())
                     .collect();
-                let total: f64 = f.iter().sum();
-                let draws = (blocks as usize * PATH_BLOCK) as f64;
-                for (i, &c) in counts.iter().enumerate() {
-                    let p = f[i] / total;
-                    let se = (p * (1.0 - p) / draws).sqrt();
-                    let freq = c as f64 / draws;
-                    assert!(
-                        (freq - p).abs() <= 4.5 * se + 1e-12,
-                        "windowed {windowed}, x {x}, candidate {i}: {freq} vs {p}"
-                    );
-                }
+                assert_frequencies(&counts, &f, &format!("windowed {windowed}, x {x}"));
                 if (x, trials) == (0.0, 2) {
                     assert!(stats.fallbacks > 0, "{stats:?}");
                 }
+            }
+        }
+    }
+
+    /// Each candidate's share of `counts` is its share of `target` (unnormalised)
+    /// within 4.5 binomial standard errors.
+    fn assert_frequencies(counts: &[usize], target: &[f64], label: &str) {
+        let total: f64 = target.iter().sum();
+        let draws = counts.iter().sum::<usize>() as f64;
+        for (i, (&c, &t)) in counts.iter().zip(target).enumerate() {
+            let p = t / total;
+            let se = (p * (1.0 - p) / draws).sqrt();
+            let freq = c as f64 / draws;
+            assert!(
+                (freq - p).abs() <= 4.5 * se + 1e-12,
+                "{label}, candidate {i}: {freq} vs {p}"
+            );
+        }
+    }
+
+    /// Weighted block draws, the open rows drawn exactly here: each candidate with
+    /// its probability `w_i f_i / sum_j w_j f_j`, within 4.5 binomial standard errors,
+    /// zero weights never.
+    #[test]
+    fn weighted_block_draws_have_the_exact_probabilities() {
+        let kernel = ScalarGaussianKernel::with_variance(0.01);
+        let mut means = vec![0.0, 0.0, 0.0, -0.1];
+        means.extend((0..20).map(|i| 0.33 + 0.015 * i as f64));
+        means.extend([-0.33; 5]);
+        means.extend([2.0; 10]);
+        means.push(-1.0);
+        let m = means.len();
+        // (the 25 means just outside the window of a row at 0 (its edges at about
+        // +-0.28, the buckets 0.0375 wide), on both sides, carry heavy weights, so
+        // that its draws often land outside the window)
+        let weights: Vec<f64> = (0..m)
+            .map(|i| {
+                let heavy = if (4..29).contains(&i) { 20.0 } else { 1.0 };
+                heavy
+                    * match i % 5 {
+                        0 => 0.0,
+                        1 => 3.0,
+                        2 => 0.01,
+                        _ => 1.0,
+                    }
+            })
+            .collect();
+        let mut buckets = MeanBuckets::default();
+        assert!(buckets.build(&means, kernel));
+        buckets.cumulate_weights(&weights);
+        let mut proposals = BlockProposals::default();
+        for (x, trials) in [(0.0, 8), (0.0, 2), (0.45, 8), (1.2, 8), (2.02, 3)] {
+            let next = [x; PATH_BLOCK];
+            let target: Vec<f64> = means
+                .iter()
+                .zip(&weights)
+                .map(|(&mu, &w)| w * kernel.log_density(mu, x).exp())
+                .collect();
+            let mut counts = vec![0usize; m];
+            let (mut fallbacks, blocks) = (0, 3000);
+            for block in 0..blocks {
+                let mut out = [0usize; PATH_BLOCK];
+                let mut rng = crate::stream(78, block);
+                let open = draw_weighted_block(
+                    kernel,
+                    &buckets,
+                    &mut proposals,
+                    &next,
+                    trials,
+                    0,
+                    &mut out,
+                    &mut rng,
+                )
+                .unwrap();
+                for k in open.rows() {
+                    fallbacks += 1;
+                    out[k] = draw_from_weights(&target, rng.random()).unwrap();
+                }
+                for &i in &out {
+                    counts[i] += 1;
+                }
+            }
+            assert_frequencies(&counts, &target, &format!("x {x}"));
+            if (x, trials) == (0.0, 2) {
+                assert!(fallbacks > 0);
             }
         }
     }

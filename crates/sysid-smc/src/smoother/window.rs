@@ -1,5 +1,5 @@
-//! Windowed proposals for rejection draws among equally weighted candidates with
-//! scalar Gaussian transitions.
+//! Windowed proposals for rejection draws among candidates with scalar Gaussian
+//! transitions, equally weighted (Tanizaki's smoother) or weighted (rejection FFBSi).
 //!
 //! # Algorithm
 //! The target of a row `x~` is `p_i ∝ f_i = N(x~; m_i, v)` over the candidates' means
@@ -27,13 +27,19 @@
 //! that is about 2 trials per draw instead of 5 (truth) to 10 (a poor fit) without a
 //! trial cap, and far fewer rows reach the exact fallback.
 //!
+//! Weighted candidates (target `p_i ∝ w_i f_i`) scale each envelope by the weight,
+//! `w_i g_i`: the window's mass is its candidates' total weight, and a trial finds its
+//! candidate by bisecting the running sums of the weights in sorted order
+//! ([`BlockProposals::propose_weighted`]) instead of by one multiplication.
+//!
 //! Sorting and preparing the windows cost about as much as the trials they save when
 //! most windows would hold every mean, so a step whose means lie within one window's
 //! width keeps the uniform proposal ([`MeanBuckets::build`] tells which).
 //!
 //! # Complexity
-//! O(M + B) per step for the buckets (B = 2M); O(1) per row for its window and per
-//! trial.
+//! O(M + B) per step for the buckets (B = 2M), plus O(M) for the running sums of
+//! weights; O(1) per row for its window, and per trial O(1) (equal weights) or
+//! O(log W) for a window of W candidates (weighted; O(log M) outside it).
 
 use super::backward::PATH_BLOCK;
 use crate::model::ScalarGaussianKernel;
@@ -67,6 +73,9 @@ pub(crate) struct MeanBuckets {
     distinct: Vec<f64>,
     /// The buckets of the means in their given order (scratch of the sort).
     scratch: Vec<u32>,
+    /// Running sums of the candidates' weights in sorted order, when they are
+    /// weighted: `cumulative[p]` sums the positions before `p` (`M + 1` entries).
+    cumulative: Vec<f64>,
 }
 
 impl MeanBuckets {
@@ -148,6 +157,25 @@ impl MeanBuckets {
         index_at((x - self.low) * self.scale, self.last_bucket)
     }
 
+    /// Sums the candidates' `weights` (non-negative, finite; one per mean) in sorted
+    /// order, for [`BlockProposals::propose_weighted`].
+    #[inline(always)]
+    pub fn cumulate_weights(&mut self, weights: &[f64]) {
+        self.cumulative.clear();
+        self.cumulative.push(0.0);
+        let mut total = 0.0;
+        for &i in &self.order {
+            total += weights[i as usize];
+            self.cumulative.push(total);
+        }
+    }
+
+    /// The running sums of [`MeanBuckets::cumulate_weights`].
+    #[inline(always)]
+    pub fn cumulative(&self) -> &[f64] {
+        &self.cumulative
+    }
+
     /// The means in sorted order.
     #[inline(always)]
     pub fn sorted(&self) -> &[f64] {
@@ -186,7 +214,10 @@ pub(crate) struct BlockProposals {
     width: [usize; PATH_BLOCK],
     /// `M - W`.
     outside: [usize; PATH_BLOCK],
-    /// `W + (M - W) g_out / g_max`.
+    /// The window's share of the proposal before scaling by `g_max`: its width, or
+    /// its candidates' total weight when they are weighted.
+    inside_mass: [f64; PATH_BLOCK],
+    /// The inside mass plus the outside one times `g_out / g_max`.
     total_mass: [f64; PATH_BLOCK],
     /// `g_max / g_out` (infinite when `g_out` underflows).
     inverse_outside_mass: [f64; PATH_BLOCK],
@@ -201,6 +232,7 @@ impl Default for BlockProposals {
             first: [0; PATH_BLOCK],
             width: [0; PATH_BLOCK],
             outside: [0; PATH_BLOCK],
+            inside_mass: [0.0; PATH_BLOCK],
             total_mass: [0.0; PATH_BLOCK],
             inverse_outside_mass: [0.0; PATH_BLOCK],
             log_bound_inside: [0.0; PATH_BLOCK],
@@ -212,7 +244,9 @@ impl Default for BlockProposals {
 impl BlockProposals {
     /// Prepares the proposals of the rows `next_states` (at most [`PATH_BLOCK`]) with
     /// their largest log-densities `row_max` at the nearest distances `nearest`: each
-    /// row's window covers `[x - r, x + r]`, `r = sqrt(nearest^2 + 2 c v)`.
+    /// row's window covers `[x - r, x + r]`, `r = sqrt(nearest^2 + 2 c v)`. With
+    /// `weighted`, each candidate's envelope is scaled by its weight (summed by
+    /// [`MeanBuckets::cumulate_weights`]), for [`BlockProposals::propose_weighted`].
     ///
     /// A candidate outside lies in a bucket before that of `x - r` (so below `x - r`,
     /// the bucket growing with the number, also after rounding, and its residual
@@ -227,6 +261,7 @@ impl BlockProposals {
         next_states: &[f64],
         nearest: &[f64],
         row_max: &[f64],
+        weighted: bool,
     ) {
         let m = buckets.sorted.len();
         let rows = next_states.len();
@@ -262,8 +297,23 @@ impl BlockProposals {
         }
         exp_shifted_sum(&mut ratio[..rows], 0.0);
         for (k, &r) in ratio[..rows].iter().enumerate() {
-            self.total_mass[k] = self.width[k] as f64 + self.outside[k] as f64 * r;
+            let (inside, outside) = if weighted {
+                let cumulative = &buckets.cumulative;
+                let (first, width) = (self.first[k], self.width[k]);
+                let inside = cumulative[first + width] - cumulative[first];
+                (inside, (cumulative[m] - inside).max(0.0))
+            } else {
+                (self.width[k] as f64, self.outside[k] as f64)
+            };
+            self.inside_mass[k] = inside;
+            self.total_mass[k] = inside + outside * r;
             self.inverse_outside_mass[k] = 1.0 / r;
+            if self.total_mass[k].is_nan() || self.total_mass[k] <= 0.0 {
+                // no proposal at all (a window of zero weights, the outside
+                // underflowing): every trial is rejected, for the exact draw
+                self.log_bound_inside[k] = f64::INFINITY;
+                self.log_bound_outside[k] = f64::INFINITY;
+            }
         }
     }
 
@@ -283,6 +333,40 @@ impl BlockProposals {
         );
         let beyond = j + if j < first { 0 } else { width };
         std::hint::select_unpredictable(z < width_mass || outside == 0, inside, beyond)
+    }
+
+    /// Row `k`'s sorted position proposed by a uniform in [0, 1) among weighted
+    /// candidates (`cumulative`, their running sums from
+    /// [`MeanBuckets::cumulative`]): the window's positions each with their weight,
+    /// the others each with their weight times `g_out / g_max`.
+    #[inline(always)]
+    pub fn propose_weighted(&self, k: usize, uniform: f64, cumulative: &[f64]) -> usize {
+        let z = uniform * self.total_mass[k];
+        let (first, width) = (self.first[k], self.width[k]);
+        let inside_mass = self.inside_mass[k];
+        let below = cumulative[first];
+        // a running sum to find, and the positions to look among
+        let (sum, low, high) = if z < inside_mass {
+            (below + z, first, first + width)
+        } else {
+            // (a NaN from 0 * inf, at an edge of probability ~2^-53, gives `low`)
+            let beyond = (z - inside_mass) * self.inverse_outside_mass[k];
+            let sum = if beyond < below {
+                beyond
+            } else {
+                beyond + inside_mass
+            };
+            (sum, 0, cumulative.len() - 1)
+        };
+        // the last position at or below the sum (the one whose weight spans it), by a
+        // branch-free bisection
+        let (mut pos, mut len) = (low, high - low);
+        while len > 1 {
+            let half = len / 2;
+            pos = std::hint::select_unpredictable(cumulative[pos + half] <= sum, pos + half, pos);
+            len -= half;
+        }
+        pos
     }
 
     /// Row `k`'s log-envelope at sorted position `pos`: `log g_max` inside its window,
@@ -347,7 +431,7 @@ mod tests {
         row_max: f64,
     ) -> (usize, usize, f64) {
         let mut p = BlockProposals::default();
-        p.prepare(buckets, kernel, &[x], &[nearest], &[row_max]);
+        p.prepare(buckets, kernel, &[x], &[nearest], &[row_max], false);
         (p.first[0], p.width[0], p.log_bound_outside[0])
     }
 
@@ -409,17 +493,15 @@ mod tests {
         );
     }
 
-    /// The proposal gives each window position mass 1 and each other position the
-    /// outside ratio: a fine grid of uniforms lands on them in those proportions.
-    #[test]
-    fn proposals_follow_the_envelope() {
-        let kernel = ScalarGaussianKernel::with_variance(0.01);
-        let means: Vec<f64> = (0..11).map(|i| i as f64 * 0.1).collect();
-        let mut buckets = MeanBuckets::default();
-        assert!(buckets.build(&means, kernel));
-        // rows at, between and beyond the means; one far off, where the window holds
-        // every mean, and one whose outside mass underflows
-        let rows = [0.0, 0.43, 1.0, 0.5, -3.0, 0.2];
+    /// The proposals of `rows` among `means` (sorted in `buckets`), with the rows'
+    /// nearest distances and maxima by a plain scan.
+    fn prepared(
+        buckets: &MeanBuckets,
+        kernel: ScalarGaussianKernel,
+        means: &[f64],
+        rows: &[f64],
+        weighted: bool,
+    ) -> (BlockProposals, Vec<f64>, Vec<f64>) {
         let nearest: Vec<f64> = rows
             .iter()
             .map(|x| {
@@ -431,7 +513,22 @@ mod tests {
             .collect();
         let row_max: Vec<f64> = nearest.iter().map(|&d| kernel.log_density_at(d)).collect();
         let mut p = BlockProposals::default();
-        p.prepare(&buckets, kernel, &rows, &nearest, &row_max);
+        p.prepare(buckets, kernel, rows, &nearest, &row_max, weighted);
+        (p, nearest, row_max)
+    }
+
+    /// The proposal gives each window position mass 1 and each other position the
+    /// outside ratio: a fine grid of uniforms lands on them in those proportions.
+    #[test]
+    fn proposals_follow_the_envelope() {
+        let kernel = ScalarGaussianKernel::with_variance(0.01);
+        let means: Vec<f64> = (0..11).map(|i| i as f64 * 0.1).collect();
+        let mut buckets = MeanBuckets::default();
+        assert!(buckets.build(&means, kernel));
+        // rows at, between and beyond the means; one far off, where the window holds
+        // every mean, and one whose outside mass underflows
+        let rows = [0.0, 0.43, 1.0, 0.5, -3.0, 0.2];
+        let (mut p, _, _) = prepared(&buckets, kernel, &means, &rows, false);
         // (an underflowing outside mass for the last row)
         p.log_bound_outside[5] = -2000.0;
         p.total_mass[5] = p.width[5] as f64;
@@ -461,5 +558,67 @@ mod tests {
             assert!(p.propose(k, 1.0 - f64::EPSILON / 2.0) < means.len());
         }
         assert!(partial >= 3, "windows that hold some of the means");
+    }
+
+    /// Weighted candidates: each window position is proposed with its weight, each
+    /// other with its weight times the outside ratio, zero weights never; a window
+    /// whose weights are all zero proposes outside it only.
+    #[test]
+    fn weighted_proposals_follow_the_envelope() {
+        let kernel = ScalarGaussianKernel::with_variance(0.01);
+        // (listed out of order, so that sorted positions differ from candidates)
+        let means: Vec<f64> = (0..13).map(|i| ((i * 5) % 13) as f64 * 0.1).collect();
+        let weights: Vec<f64> = (0..13)
+            .map(|i| {
+                if i % 4 == 1 {
+                    0.0
+                } else {
+                    1.0 + (i % 3) as f64
+                }
+            })
+            .collect();
+        let mut buckets = MeanBuckets::default();
+        assert!(buckets.build(&means, kernel));
+        buckets.cumulate_weights(&weights);
+        let sorted_weights: Vec<f64> = (0..means.len())
+            .map(|pos| weights[buckets.candidate(pos)])
+            .collect();
+        let rows = [0.0, 0.43, 1.2, 0.6, -3.0];
+        let (mut p, nearest, row_max) = prepared(&buckets, kernel, &means, &rows, true);
+        let mut partial = 0;
+        for (k, &x) in rows.iter().enumerate() {
+            let ratio = (p.log_bound_outside[k] - p.log_bound_inside[k]).exp();
+            let (first, width) = (p.first[k], p.width[k]);
+            partial += usize::from(width > 0 && width < means.len());
+            let inside = |pos: usize| pos >= first && pos < first + width;
+            let envelope = |pos: usize| sorted_weights[pos] * if inside(pos) { 1.0 } else { ratio };
+            let total: f64 = (0..means.len()).map(envelope).sum();
+            let n = 1_000_000;
+            let mut counts = vec![0usize; means.len()];
+            for j in 0..n {
+                let u = (j as f64 + 0.5) / n as f64;
+                counts[p.propose_weighted(k, u, buckets.cumulative())] += 1;
+            }
+            for (pos, &c) in counts.iter().enumerate() {
+                let (freq, expected) = (c as f64 / n as f64, envelope(pos) / total);
+                assert!(
+                    (freq - expected).abs() < 2.0 / n as f64,
+                    "row {x}, pos {pos}: {freq} vs {expected}"
+                );
+            }
+        }
+        assert!(partial >= 3, "windows that hold some of the means");
+        // zero weights throughout the first row's window
+        let mut zero_inside = weights.clone();
+        for pos in p.first[0]..p.first[0] + p.width[0] {
+            zero_inside[buckets.candidate(pos)] = 0.0;
+        }
+        buckets.cumulate_weights(&zero_inside);
+        p.prepare(&buckets, kernel, &rows[..1], &nearest, &row_max, true);
+        assert!(p.total_mass[0] > 0.0);
+        for j in 0..1000 {
+            let pos = p.propose_weighted(0, (j as f64 + 0.5) / 1000.0, buckets.cumulative());
+            assert!(zero_inside[buckets.candidate(pos)] > 0.0, "pos {pos}");
+        }
     }
 }

@@ -259,7 +259,10 @@ impl<M: TransitionDensity + Sync> Smoother<M> for Tanizaki {
 /// Proposals come from `Cat(W_t)` and are accepted with probability `f / c`: `c` is
 /// each path's own largest transition density (from the nearest transition mean) for
 /// scalar Gaussian transitions with at most 256 particles, else the model's
-/// [`TransitionBound`].
+/// [`TransitionBound`]. In the first case, at steps whose transition means spread
+/// wider than the transition noise allows one path to reach, each path proposes from
+/// the window of means around it instead (weighted by `W_t`, with a bound for the
+/// means outside), which needs far fewer trials; the draws have the same law.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FfbsiReject {
     /// Number of paths K.

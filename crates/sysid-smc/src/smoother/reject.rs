@@ -46,7 +46,10 @@ use crate::{History, Series, SmcError};
 /// nearest-mean pass costs O(M) per path, which at M = 50 (seed 000's benchmark) is
 /// repaid by the trials it saves (1000 EM iterations: 2.9-5.8 s against 3.8-7.0 s),
 /// but not at M = 1000 (the `ffbsi_reject` benchmark: 24 ms against 18 ms, 11 % fewer
-/// trials).
+/// trials). The windows need that maximum too, so they are used only up to here.
+/// (Not tried beyond: at M = 1000 with 100 paths, a step's O(M) bucket sort and
+/// running sums would cost microseconds per step, like the alias table, which already
+/// takes 30 % of that benchmark at about 5 us per step.)
 const ROW_BOUND_MAX_PARTICLES: usize = 256;
 
 pub(crate) struct RejectStep<'a, M> {
@@ -109,17 +112,13 @@ pub(crate) struct ProposalTable {
 }
 
 impl ProposalTable {
-    /// Makes this the proposal of step `t`; `false` when it already was. The alias
-    /// table is built only with `build_table`.
-    fn prepare(&mut self, history: &History, t: usize, build_table: bool) -> bool {
-        if self.step == Some(t) {
-            return false;
-        }
+    /// Makes this the proposal of step `t`, building its alias table only with
+    /// `build_table` (windowed steps draw from the weights' running sums instead).
+    fn prepare(&mut self, history: &History, t: usize, build_table: bool) {
         if build_table {
             self.table.build(history.weights(t));
         }
         self.step = Some(t);
-        true
     }
 
     /// Whether the proposal is that of step `t`.

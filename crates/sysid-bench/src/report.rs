@@ -129,6 +129,13 @@ const FLOORS: &[Floor] = &[
     },
     Floor {
         task: "ffbsi_reject",
+        select: &[("M", "50")],
+        field: "ms_median",
+        floor: 0.6,
+        why: "5e4 draws x ~2 trials x ~3 ns, plus 1000 steps x ~0.3 us for the transition means and either their bucket sort with the weights' running sums or an alias table",
+    },
+    Floor {
+        task: "ffbsi_reject",
         select: &[("M", "1000")],
         field: "ms_median",
         floor: 6.0,

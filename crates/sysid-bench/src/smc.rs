@@ -168,8 +168,8 @@ pub fn run(reps: usize) {
     );
 
     // rejection FFBSi as particle EM's E-step (seed 000: 50 paths among M = 50): one
-    // run's 1 s per 1000 EM iterations leaves about 0.2 ms per pass once the filter
-    // (~0.62 ms) and the statistics (~0.2 ms) are paid
+    // run's 1 s per 1000 EM iterations leaves 0.2-0.3 ms per pass once the filter
+    // (~0.52 ms) and the statistics (0.2-0.3 ms) are paid; the target takes 0.2 ms
     rejection_line(&mut report, &model, history, &data, reps, 50, 0.2);
 
     emit(&json!({"task": "smc_summary", "params": {"reps": reps}, "targets": report.checks}));

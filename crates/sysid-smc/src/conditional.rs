@@ -195,8 +195,7 @@ impl ConditionalSmc {
         rng: &mut R,
     ) -> Result<CsmcSummary, SmcError> {
         self.check_output(model.state_dim(), data, out)?;
-        self.forward(model, data, reference, &Bootstrap, rng)?;
-        self.finish(model, data, out, rng)?;
+        self.dispatched_sweep(model, data, reference, &Bootstrap, out, rng)?;
         Ok(CsmcSummary {
             loglik: self.loglik,
         })
@@ -223,10 +222,37 @@ impl ConditionalSmc {
         R: rand::Rng + ?Sized,
     {
         self.check_output(model.state_dim(), data, out)?;
-        self.forward(model, data, reference, &Guided, rng)?;
-        self.finish(model, data, out, rng)?;
+        self.dispatched_sweep(model, data, reference, &Guided, out, rng)?;
         Ok(CsmcSummary {
             loglik: self.loglik,
+        })
+    }
+
+    /// The forward pass and the draw of the new trajectory, compiled for the CPU's
+    /// widest vector set ([`crate::simd::dispatch`]; the model's methods inlined into
+    /// them too); the same numbers on every path.
+    fn dispatched_sweep<M, P, R>(
+        &mut self,
+        model: &M,
+        data: &Series,
+        reference: Option<&[f64]>,
+        proposer: &P,
+        out: &mut [f64],
+        rng: &mut R,
+    ) -> Result<(), SmcError>
+    where
+        M: FilterModel + TransitionDensity,
+        P: Proposer<M>,
+        R: rand::Rng + ?Sized,
+    {
+        crate::simd::dispatch(SweepKernel {
+            csmc: self,
+            model,
+            data,
+            reference,
+            proposer,
+            out,
+            rng,
         })
     }
 
@@ -268,6 +294,7 @@ impl ConditionalSmc {
     }
 
     /// Draws the new trajectory from the stored particle system.
+    #[inline(always)]
     fn finish<M: TransitionDensity, R: rand::Rng + ?Sized>(
         &mut self,
         model: &M,
@@ -357,6 +384,7 @@ impl ConditionalSmc {
         Ok(())
     }
 
+    #[inline(always)]
     fn forward<M: FilterModel + TransitionDensity, P: Proposer<M>, R: rand::Rng + ?Sized>(
         &mut self,
         model: &M,
@@ -589,6 +617,34 @@ fn weight_failure(log_obs: &[f64], increment: f64, t: usize) -> SmcError {
 }
 
 /// How the free particles of a step are proposed.
+/// [`ConditionalSmc::dispatched_sweep`]'s work as a [`crate::simd::Kernel`].
+struct SweepKernel<'a, 'd, M, P, R: ?Sized> {
+    csmc: &'a mut ConditionalSmc,
+    model: &'a M,
+    data: &'a Series<'d>,
+    reference: Option<&'a [f64]>,
+    proposer: &'a P,
+    out: &'a mut [f64],
+    rng: &'a mut R,
+}
+
+impl<M, P, R> crate::simd::Kernel for SweepKernel<'_, '_, M, P, R>
+where
+    M: FilterModel + TransitionDensity,
+    P: Proposer<M>,
+    R: rand::Rng + ?Sized,
+{
+    type Output = Result<(), SmcError>;
+
+    #[inline(always)]
+    fn run(self) -> Self::Output {
+        let (model, data) = (self.model, self.data);
+        self.csmc
+            .forward(model, data, self.reference, self.proposer, &mut *self.rng)?;
+        self.csmc.finish(model, data, self.out, self.rng)
+    }
+}
+
 trait Proposer<M> {
     /// Whether step `t` uses the guided proposal.
     fn guided(&self, data: &Series, t: usize) -> bool;

@@ -67,37 +67,47 @@ pub(crate) fn means_usable(means: &[f64]) -> bool {
     !means.iter().any(|m| m.is_nan())
 }
 
-/// For each `next_states[k]` of a block, `max[k] = max_i log f(next_states[k] | mean_i)`
-/// from the nearest of `means` (free of NaN, see [`means_usable`]), at the distance
-/// `nearest[k]`; an error names the row whose state is NaN or whose maximum is not
-/// finite.
+/// The largest log-densities of a block's rows and the distances they sit at, each
+/// indexed by row (entries past the block's rows are 0).
+pub(crate) struct RowMaxima {
+    /// `max[k] = max_i log f(next_states[k] | mean_i)`.
+    pub max: [f64; PATH_BLOCK],
+    /// The distance from `next_states[k]` to the nearest mean.
+    pub nearest: [f64; PATH_BLOCK],
+}
+
+/// For each `next_states[k]` of a block, its largest log-density from the nearest of
+/// `means` (free of NaN, see [`means_usable`]), and that mean's distance; an error
+/// names the row whose state is NaN or whose maximum is not finite.
 #[inline(always)]
 pub(crate) fn row_maxima(
     kernel: ScalarGaussianKernel,
     means: &[f64],
     next_states: &[f64],
     t: usize,
-    max: &mut [f64],
-    nearest: &mut [f64],
-) -> Result<(), SmcError> {
+) -> Result<RowMaxima, SmcError> {
     let rows = next_states.len();
     debug_assert!(rows <= PATH_BLOCK, "a block has at most PATH_BLOCK paths");
     if let Some(k) = next_states.iter().position(|x| x.is_nan()) {
         return Err(backward_error(DrawFailure::Invalid, t, k));
     }
-    nearest_distances(means, next_states, &mut nearest[..rows]);
+    let mut found = RowMaxima {
+        max: [0.0; PATH_BLOCK],
+        nearest: [0.0; PATH_BLOCK],
+    };
+    nearest_distances(means, next_states, &mut found.nearest[..rows]);
     for k in 0..rows {
         // the same number as the largest of the row's log-densities
-        let row_max = kernel.log_density_at(nearest[k]);
+        let row_max = kernel.log_density_at(found.nearest[k]);
         if row_max == f64::NEG_INFINITY {
             return Err(backward_error(DrawFailure::Degenerate, t, k));
         }
         if row_max.is_nan() || row_max == f64::INFINITY {
             return Err(backward_error(DrawFailure::Invalid, t, k));
         }
-        max[k] = row_max;
+        found.max[k] = row_max;
     }
-    Ok(())
+    Ok(found)
 }
 
 /// One backward step of a block among equally weighted candidates: for each
@@ -125,19 +135,10 @@ pub(crate) fn draw_block(
 ) -> Result<(), SmcError> {
     let m = means.len();
     let rows = next_states.len();
-    let mut max = [0.0; PATH_BLOCK];
-    let mut nearest = [0.0; PATH_BLOCK];
     // the candidates as the trials see them: sorted, or as given
     let candidates = buckets.map_or(means, MeanBuckets::sorted);
     let distinct = buckets.map_or(means, MeanBuckets::distinct);
-    row_maxima(
-        kernel,
-        distinct,
-        next_states,
-        t,
-        &mut max[..rows],
-        &mut nearest[..rows],
-    )?;
+    let RowMaxima { max, nearest } = row_maxima(kernel, distinct, next_states, t)?;
     let open = match buckets {
         Some(buckets) => {
             proposals.prepare(buckets, kernel, next_states, &nearest, &max, false);
@@ -204,16 +205,7 @@ pub(crate) fn draw_weighted_block(
     out: &mut [usize],
     rng: &mut Rng,
 ) -> Result<OpenRows, SmcError> {
-    let rows = next_states.len();
-    let (mut max, mut nearest) = ([0.0; PATH_BLOCK], [0.0; PATH_BLOCK]);
-    row_maxima(
-        kernel,
-        buckets.distinct(),
-        next_states,
-        t,
-        &mut max[..rows],
-        &mut nearest[..rows],
-    )?;
+    let RowMaxima { max, nearest } = row_maxima(kernel, buckets.distinct(), next_states, t)?;
     proposals.prepare(buckets, kernel, next_states, &nearest, &max, true);
     let proposals = &*proposals;
     let (sorted, cumulative) = (buckets.sorted(), buckets.cumulative());

@@ -33,7 +33,7 @@ use rand::RngExt;
 
 use super::SmootherStats;
 use super::alias::AliasTable;
-use super::backward::{DispatchedStep, PATH_BLOCK, backward_error};
+use super::backward::{DispatchedStep, backward_error};
 use super::nearest;
 use super::rounds::draw_in_rounds;
 use super::window::{BlockProposals, MeanBuckets};
@@ -203,16 +203,7 @@ impl<M: TransitionBound> DispatchedStep for RejectStep<'_, M> {
             Some(kernel) if row_bounds => {
                 // each row's own maximum: exact, so no density can exceed it
                 self.stats.density_evaluations += out.len() as u64;
-                let (mut row_max, mut distance) = ([0.0; PATH_BLOCK], [0.0; PATH_BLOCK]);
-                let rows = out.len();
-                nearest::row_maxima(
-                    kernel,
-                    means,
-                    next_states,
-                    t,
-                    &mut row_max[..rows],
-                    &mut distance[..rows],
-                )?;
+                let row_max = nearest::row_maxima(kernel, means, next_states, t)?.max;
                 draw_in_rounds(
                     self.max_trials,
                     rng,

@@ -240,12 +240,20 @@ fn tanizaki_by_rejection_and_by_exact_draws_give_the_same_marginals() {
     let (exact, exact_stats) = exact_smoother
         .trajectories(&model, history, &data, 1)
         .unwrap();
-    let (rejection, stats) = Tanizaki::default()
-        .trajectories(&model, history, &data, 2)
-        .unwrap();
     assert_eq!(exact_stats.trials, 0);
-    assert!(stats.trials > 0 && stats.fallbacks > 0, "{stats:?}");
-    assert_same_marginals(&exact, &rejection, &[0, 15, 30, 45, 59]);
+    // the default cap, and a cap of 2 trials, under which many rows fall back
+    for (cap, seed) in [(None, 2), (Some(2), 3)] {
+        let smoother = Tanizaki {
+            parallel: false,
+            max_trials: cap,
+        };
+        let (rejection, stats) = smoother.trajectories(&model, history, &data, seed).unwrap();
+        assert!(stats.trials > 0, "{stats:?}");
+        if cap.is_some() {
+            assert!(stats.fallbacks > 0, "{stats:?}");
+        }
+        assert_same_marginals(&exact, &rejection, &[0, 15, 30, 45, 59]);
+    }
 }
 
 #[test]

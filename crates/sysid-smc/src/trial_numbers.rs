@@ -30,7 +30,7 @@ use crate::lanes::{LANES, Lanes, minus_two_log, seed_words, unit_interval_above_
 use crate::simd::{Kernel, dispatch};
 
 /// Pairs per refill.
-pub(crate) const CHUNK: usize = 64;
+pub(crate) const CHUNK: usize = 128;
 
 /// A buffer of `(uniform, exponential)` pairs, refilled from the caller's generator.
 pub(crate) struct TrialNumbers {
@@ -158,7 +158,7 @@ mod tests {
         let bound = 4.0 / (n as f64).sqrt();
         let su = 1.0 / 12f64.sqrt();
         assert!(correlation(&cu, &ce, 0, su).abs() < bound, "u with E");
-        for lag in [1, 8, 63, 64, 65] {
+        for lag in [1, 8, CHUNK - 1, CHUNK, CHUNK + 1] {
             let r = correlation(&cu, &cu, lag, su * su);
             assert!(r.abs() < bound, "uniforms, lag {lag}: {r}");
             let r = correlation(&ce, &ce, lag, 1.0);
@@ -191,17 +191,18 @@ mod tests {
         let all = pairs(3, 2 * CHUNK);
         let mut rng = stream(3, 0);
         let mut numbers = TrialNumbers::new();
-        let (u, _) = numbers.take(&mut rng, 40);
-        assert_eq!(u[39].to_bits(), all[39].0.to_bits());
-        let (u, _) = numbers.take(&mut rng, 24);
+        let first = CHUNK * 5 / 8;
+        let (u, _) = numbers.take(&mut rng, first);
+        assert_eq!(u[first - 1].to_bits(), all[first - 1].0.to_bits());
+        let (u, _) = numbers.take(&mut rng, CHUNK - first);
         assert_eq!(
-            u[23].to_bits(),
-            all[63].0.to_bits(),
+            u[CHUNK - first - 1].to_bits(),
+            all[CHUNK - 1].0.to_bits(),
             "exactly fills the buffer"
         );
         let (u, _) = numbers.take(&mut rng, 10);
-        assert_eq!(u[0].to_bits(), all[64].0.to_bits(), "the next buffer");
-        let (u, _) = numbers.take(&mut rng, 60);
+        assert_eq!(u[0].to_bits(), all[CHUNK].0.to_bits(), "the next buffer");
+        let (u, _) = numbers.take(&mut rng, CHUNK - 4);
         assert_eq!(
             u[0].to_bits(),
             pairs_after_two_refills(),

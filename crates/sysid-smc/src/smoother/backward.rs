@@ -11,7 +11,7 @@ use crate::weights::{DrawFailure, find_cumulative};
 use crate::{History, SmcError};
 
 /// Paths per block (and per random stream).
-pub const PATH_BLOCK: usize = 32;
+pub const PATH_BLOCK: usize = 64;
 
 /// One backward step of a smoother: given the particle indices (into step `t + 1`) and
 /// states of a block of paths, choose their indices into step `t`.

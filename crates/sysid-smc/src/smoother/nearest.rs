@@ -31,19 +31,26 @@ use crate::streams::Rng;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{DrawFailure, draw_from_weights};
 
+/// The most points that one pass over the means takes: few enough lanes to stay in
+/// registers.
+const NEAREST_LANES: usize = 32;
+
 /// For each `x_k` of `points` (at most [`PATH_BLOCK`]), the smallest `|x_k - m_i|`
 /// over `means` into `nearest[k]` (the caller has checked both for NaN). Points are the
-/// inner loop, up to 32 at a time in as few vectors of eight as hold them: no
-/// horizontal reduction, up to four independent dependency chains per mean instead of
-/// one, and few enough lanes to stay in registers.
+/// inner loop, up to [`NEAREST_LANES`] at a time in as few vectors of eight as hold
+/// them: no horizontal reduction, and up to four independent dependency chains per
+/// mean instead of one.
 #[inline(always)]
 fn nearest_distances(means: &[f64], points: &[f64], nearest: &mut [f64]) {
-    for (points, nearest) in points.chunks(32).zip(nearest.chunks_mut(32)) {
+    let pieces = points
+        .chunks(NEAREST_LANES)
+        .zip(nearest.chunks_mut(NEAREST_LANES));
+    for (points, nearest) in pieces {
         match points.len() {
             0..=8 => nearest_in_lanes::<8>(means, points, nearest),
             9..=16 => nearest_in_lanes::<16>(means, points, nearest),
             17..=24 => nearest_in_lanes::<24>(means, points, nearest),
-            _ => nearest_in_lanes::<32>(means, points, nearest),
+            _ => nearest_in_lanes::<NEAREST_LANES>(means, points, nearest),
         }
     }
 }

@@ -23,6 +23,9 @@ use super::backward::PATH_BLOCK;
 use crate::streams::Rng;
 use crate::trial_numbers::TrialNumbers;
 
+// a round takes one run of trial numbers for a whole block, and rows are kept as `u8`
+const _: () = assert!(PATH_BLOCK <= crate::trial_numbers::CHUNK && PATH_BLOCK <= 256);
+
 /// What [`draw_in_rounds`] leaves open: the rows that rejected every trial.
 pub(crate) struct OpenRows {
     rows: [u8; PATH_BLOCK],

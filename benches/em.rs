@@ -16,6 +16,7 @@ fn em(c: &mut Criterion) {
         let options = N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         };
         let start = n4sid(&sim.record, &options).unwrap().model;
         let start = start.without_cross_covariance();

@@ -92,6 +92,7 @@ fn main() {
         &N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         },
     )
     .unwrap();

@@ -30,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         },
     )?;
     let s = &subspace.singular_values;

@@ -14,6 +14,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let options = N4sidOptions {
         order: Order::Fixed(8),
         block_rows: None,
+        ..Default::default()
     };
     let start = n4sid(&sim.record, &options)?
         .model

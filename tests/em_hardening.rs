@@ -95,6 +95,7 @@ fn lti2x2_from_n4sid_with_floor(
         &N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         },
     )
     .unwrap();

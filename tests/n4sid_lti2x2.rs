@@ -55,6 +55,7 @@ fn order_five_reaches_95_percent_fit_on_both_outputs() {
         &N4sidOptions {
             order: Order::Fixed(5),
             block_rows: None,
+            ..Default::default()
         },
     )
     .unwrap();
@@ -78,6 +79,7 @@ fn order_eight_singular_values_show_the_order() {
         &N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         },
     )
     .unwrap();
@@ -117,6 +119,7 @@ fn bad_input_is_reported() {
         &N4sidOptions {
             order: Order::Fixed(25),
             block_rows: Some(10),
+            ..Default::default()
         },
     );
     assert!(
@@ -139,6 +142,7 @@ fn bad_input_is_reported() {
         &N4sidOptions {
             order: Order::Fixed(4),
             block_rows: Some(10),
+            ..Default::default()
         },
     );
     assert!(

@@ -31,6 +31,7 @@ pub fn run(reps: usize) {
             &N4sidOptions {
                 order: Order::Fixed(8),
                 block_rows: None,
+                ..Default::default()
             },
         )
         .expect("n4sid")
@@ -54,6 +55,7 @@ pub fn run(reps: usize) {
             let options = N4sidOptions {
                 order: Order::Fixed(8),
                 block_rows: None,
+                ..Default::default()
             };
             let (median, min, max) = time_ms(reps, || {
                 std::hint::black_box(n4sid(&records[0], &options).expect("n4sid"));

@@ -61,6 +61,7 @@ fn one_dataset(index: usize, args: &Args) -> Vec<Value> {
         &N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         },
     );
     let n4sid_seconds = n4sid_start.elapsed().as_secs_f64();

@@ -177,6 +177,12 @@ pub(crate) fn say(line: &str) {
     }
 }
 
+/// Prints a warning about a result that should not be trusted as it is (stderr, so
+/// that `--json` output stays one object; the same text goes in its `warnings`).
+pub(crate) fn warn(line: &str) {
+    eprintln!("sysid: warning: {line}");
+}
+
 /// Prints a command's summary: `value` as one JSON line under `--json`, else `text`.
 pub(crate) fn report(json: bool, value: serde_json::Value, text: impl FnOnce() -> String) {
     if json {

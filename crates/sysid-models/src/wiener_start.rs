@@ -39,6 +39,7 @@ pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
         &N4sidOptions {
             order: Order::Fixed(2),
             block_rows: None,
+            ..Default::default()
         },
     )
     .map_err(|e| format!("N4SID on y1: {e}"))?;

@@ -40,6 +40,16 @@ pub enum SubspaceError {
         /// Output (1-based).
         output: usize,
     },
+    /// An output never changes: it carries no information about the system.
+    #[error(
+        "output y{output} is constant ({value}) over the whole record: it has zero variance, so no model can be identified from it (drop the column)"
+    )]
+    ConstantOutput {
+        /// The output (1-based).
+        output: usize,
+        /// Its value.
+        value: f64,
+    },
     /// The data have no outputs.
     #[error("the data have no output")]
     NoOutputs,

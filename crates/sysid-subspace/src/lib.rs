@@ -17,7 +17,12 @@
 //! ```
 
 mod error;
+mod input_fit;
 mod n4sid;
+mod weighting;
 
 pub use error::SubspaceError;
-pub use n4sid::{N4sidOptions, N4sidResult, Order, auto_order, n4sid};
+pub use n4sid::{
+    Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, OrderScore, auto_order, n4sid,
+};
+pub use weighting::Weighting;

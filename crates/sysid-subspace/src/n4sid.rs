@@ -1,6 +1,8 @@
 //! N4SID: combined deterministic-stochastic subspace identification.
 
 use crate::SubspaceError;
+use crate::input_fit::fit_inputs;
+use crate::weighting::{WeightedSvd, Weighting, perp_projector};
 use nalgebra::{DMatrix, DVector};
 use sysid_kalman::{LinearGaussianModel, Record};
 
@@ -9,10 +11,39 @@ use sysid_kalman::{LinearGaussianModel, Record};
 pub enum Order {
     /// This order.
     Fixed(usize),
-    /// The order at the largest drop `ln s_k - ln s_{k+1}` of the singular values,
-    /// `k = 1 .. min(p i - 1, 20)` (a clear gap between signal and noise singular values
-    /// is what a user would look for in the returned singular values).
+    /// The order that minimises an information criterion over candidate orders
+    /// `1 ..= min(p i - 1, 20)`: each candidate is identified in full and scored by
+    /// its exact Gaussian log-likelihood on the record (Kalman filter) penalised by its
+    /// number of free parameters (see [`OrderScore`] and [`Criterion`]).
     Auto,
+}
+
+/// The information criterion of [`Order::Auto`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Criterion {
+    /// Akaike's: `-2 ln L + 2 k`.
+    Aic,
+    /// Schwarz's Bayesian: `-2 ln L + k ln T` (penalises orders more; the default,
+    /// since on measured records AIC keeps adding states that fit the estimation
+    /// data's coloured noise).
+    #[default]
+    Bic,
+}
+
+/// What `B` and `D` are fitted for (MATLAB's `n4sidOptions('Focus', ...)`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Focus {
+    /// `A, B, C, D` jointly by least squares on the state equations of the estimated
+    /// state sequence, `[X_{t+1}; Y_t] = [[A, B], [C, D]] [X_t; U_t] + residual`
+    /// (Verhaegen and Verdult 2007, as nfoursid and SIPPY do): consistent with the
+    /// noise model, so the one-step predictor is good. The default.
+    #[default]
+    Prediction,
+    /// `A, C` as above, then `B`, `D` (and the record's initial state) minimise the
+    /// squared error of the noise-free simulated output, a linear least-squares
+    /// problem given `A` and `C`: better long-horizon simulations, at some cost in
+    /// one-step prediction when the model is simpler than the process.
+    Simulation,
 }
 
 /// Options of [`n4sid`].
@@ -24,6 +55,19 @@ pub struct N4sidOptions {
     /// for a fixed order `n`, and 10 for [`Order::Auto`], reduced to the largest number
     /// the data allow, `floor((T + 1) / (2 (m + p) + 2))`. Must satisfy `p i > n`.
     pub block_rows: Option<usize>,
+    /// The weighting of the SVD (default: [`Weighting::Moesp`]).
+    pub weighting: Weighting,
+    /// What `B` and `D` are fitted for (default: [`Focus::Prediction`]).
+    pub focus: Focus,
+    /// Enforce a stable `A`: when the least-squares estimate has a pole on or outside
+    /// the unit circle, `A` is re-estimated by Maciejowski's (1995) padded shift
+    /// equation `Gamma_i A = [Gamma_i(p+1:, :); 0]`, whose solution is always stable
+    /// (at the price of some bias), and `B`, `D` are refitted to the state equations
+    /// with it (as SIPPY's `A_stability`). Off by default: the result then reports
+    /// the spectral radius, and callers should warn.
+    pub stable: bool,
+    /// The criterion of [`Order::Auto`] (default: [`Criterion::Bic`]).
+    pub criterion: Criterion,
 }
 
 impl Default for N4sidOptions {
@@ -31,8 +75,43 @@ impl Default for N4sidOptions {
         N4sidOptions {
             order: Order::Auto,
             block_rows: None,
+            weighting: Weighting::Moesp,
+            focus: Focus::Prediction,
+            stable: false,
+            criterion: Criterion::Bic,
         }
     }
+}
+
+/// How `B` and `D` were estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputMethod {
+    /// Least squares on the noise-free simulated output given `A` and `C`, with the
+    /// record's initial state as a nuisance parameter ([`Focus::Simulation`] with a
+    /// stable `A`).
+    Simulation,
+    /// Least squares on the state equations of the estimated state sequence
+    /// ([`Focus::Prediction`], and [`Focus::Simulation`] with an unstable `A`, whose
+    /// simulation diverges).
+    StateEquations,
+}
+
+/// One candidate order of [`Order::Auto`] with its score.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OrderScore {
+    /// The order.
+    pub order: usize,
+    /// Exact log-likelihood of the identified model on the record (Kalman filter);
+    /// `-inf` if the filter failed.
+    pub loglik: f64,
+    /// Free parameters of an innovation-form model of this order in a canonical basis:
+    /// `n (2 p + m) + p m + p (p + 1) / 2` (`A`, `B`, `C`, `K`, `D` and the innovation
+    /// covariance, less the `n^2` of the basis).
+    pub parameters: usize,
+    /// The criterion's value (smaller is better).
+    pub criterion: f64,
+    /// Spectral radius of this order's `A`.
+    pub spectral_radius: f64,
 }
 
 /// The identified model and what a user needs to judge it.
@@ -45,17 +124,25 @@ pub struct N4sidResult {
     pub order: usize,
     /// The number of block rows used.
     pub block_rows: usize,
-    /// All `p i` singular values of the oblique projection, largest first: the order
-    /// is where they drop.
+    /// The weighting used.
+    pub weighting: Weighting,
+    /// All `p i` singular values of the weighted oblique projection, largest first.
     pub singular_values: Vec<f64>,
-    /// Spectral radius of the estimated `A`: at least 1 means the estimate is unstable
-    /// (reported, not repaired: a Kalman filter runs on unstable models, and EM may
-    /// start from one).
+    /// Spectral radius of the estimated `A`: at least 1 means the model is unstable.
     pub spectral_radius: f64,
+    /// `A` was re-estimated to be stable ([`N4sidOptions::stable`]).
+    pub stabilised: bool,
+    /// How `B` and `D` were estimated.
+    pub input_method: InputMethod,
+    /// The inputs' regressors were collinear (e.g. an input that repeats another, or a
+    /// constant one): `B` and `D` are the minimum-norm least-squares solution.
+    pub collinear_inputs: bool,
+    /// The candidates scored by [`Order::Auto`] (empty for a fixed order).
+    pub order_scores: Vec<OrderScore>,
 }
 
 /// Pseudo-inverse with the usual tolerance `max(r, c) eps s_max`.
-fn pinv(m: &DMatrix<f64>) -> DMatrix<f64> {
+pub(crate) fn pinv(m: &DMatrix<f64>) -> DMatrix<f64> {
     if m.nrows() == 0 || m.ncols() == 0 {
         return DMatrix::zeros(m.ncols(), m.nrows());
     }
@@ -83,23 +170,36 @@ fn rows(k: &DMatrix<f64>, ranges: &[std::ops::Range<usize>]) -> DMatrix<f64> {
 /// coefficient space (rows are coefficients on orthonormal rows, so the Euclidean
 /// geometry is that of the data): `(a P) (c P)^+ c`, `P` the projector onto the
 /// orthogonal complement of the row space of `b`.
-fn oblique(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &DMatrix<f64>) -> DMatrix<f64> {
-    let r = a.ncols();
-    let mut proj = DMatrix::<f64>::identity(r, r);
-    if b.nrows() > 0 {
-        let svd = b.transpose().svd(true, false);
-        let u = svd.u.expect("requested");
-        let s_max = svd.singular_values.max();
-        let tol = b.nrows().max(r) as f64 * f64::EPSILON * s_max;
-        for (k, &s) in svd.singular_values.iter().enumerate() {
-            if s > tol {
-                let col = u.column(k);
-                proj -= col * col.transpose();
+/// `proj` is that projector; the result is `(O, L)` with `O = L c`.
+fn oblique(
+    a: &DMatrix<f64>,
+    proj: &DMatrix<f64>,
+    c: &DMatrix<f64>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let (a_perp, c_perp) = (a * proj, c * proj);
+    let weights = a_perp * pinv(&c_perp);
+    (&weights * c, weights)
+}
+
+/// The states `Gamma^+ O_i` as a time series: column `c` is the state at time `i + c`
+/// (0-based), for `c = 0 .. columns`, from the past `i` inputs and outputs before it.
+/// `map` is `Gamma^+ L` with `O_i = L W_p`.
+fn time_states(map: &DMatrix<f64>, centred: &Centred, i: usize, columns: usize) -> DMatrix<f64> {
+    let (m, p) = (centred.u.nrows(), centred.y.nrows());
+    let mut past = DVector::zeros((m + p) * i);
+    let mut states = DMatrix::zeros(map.nrows(), columns);
+    for c in 0..columns {
+        for k in 0..i {
+            for a in 0..m {
+                past[k * m + a] = centred.u[(a, c + k)];
+            }
+            for b in 0..p {
+                past[m * i + k * p + b] = centred.y[(b, c + k)];
             }
         }
+        states.set_column(c, &(map * &past));
     }
-    let (a_perp, c_perp) = (a * &proj, c * &proj);
-    a_perp * pinv(&c_perp) * c
+    states
 }
 
 /// Identifies a linear Gaussian state-space model from one record by N4SID.
@@ -109,28 +209,48 @@ fn oblique(a: &DMatrix<f64>, b: &DMatrix<f64>, c: &DMatrix<f64>) -> DMatrix<f64>
 /// `[w; e] ~ N(0, [[Q, S], [S', R]])`; without inputs the purely stochastic case.
 ///
 /// # Algorithm
-/// Van Overschee and De Moor (1996), with unit weights. Means are removed first. The
-/// block Hankel matrices of past and future inputs and outputs (`i` block rows) are
-/// stacked into `H` (`2 (m + p) i x j`, `j = T - 2i + 1`) and factored once, `H = K Q'`
-/// with orthonormal `Q` (a QR of `H'`, by faer). Every later step works on the small
-/// `K`: the oblique projection `O_i = Y_f /_{U_f} W_p`, its SVD (the returned singular
-/// values), the extended observability matrix `Gamma_i = U_1 S_1^{1/2}`, the state
-/// sequences `X_i = Gamma_i^+ O_i` and `X_{i+1} = Gamma_{i-1}^+ O_{i-1}`, and the least
-/// squares `[X_{i+1}; Y_{i|i}] = [[A, B], [C, D]] [X_i; U_{i|i}] + residual`, whose
-/// residual covariance gives `[[Q, S], [S', R]]` (a Gram matrix, so PSD by
-/// construction). `h = mean(y) - G(1) mean(u)` with `G(1) = C (I - A)^{-1} B + D`.
+/// Van Overschee and De Moor (1996), the robust variant of their section 4.3 in the
+/// parts that matter on measured data. Means are removed first. The block Hankel
+/// matrices of past and future inputs and outputs (`i` block rows) are stacked into `H`
+/// (`2 (m + p) i x j`, `j = T - 2i + 1`) and factored once, `H = K Q'` with orthonormal
+/// `Q` (a QR of `H'`, by faer); every later step works on the small `K`.
+///
+/// 1. The oblique projection `O_i = Y_f /_{U_f} W_p` is weighted and factored,
+///    `W1 O_i W2 = U S V'` ([`Weighting`]); `Gamma_i = W1^{-1} U_1 S_1^{1/2}`.
+/// 2. `C` is the first block row of `Gamma_i`, and `A` solves the shift equation
+///    `Gamma_i(1:p(i-1), :) A = Gamma_i(p+1:pi, :)` in least squares. With
+///    [`N4sidOptions::stable`] and an unstable solution, `A` solves Maciejowski's
+///    padded equation instead, which is stable by construction.
+/// 3. For a stable `A`, `B`, `D` (and the record's initial state) minimise the squared
+///    error of the noise-free simulated output, a linear least-squares problem given
+///    `A` and `C`. This replaces the joint regression on the states of `O_i` and
+///    `O_{i-1}` (the "biased" algorithm 1), whose `B`, `D` are inconsistent for
+///    coloured inputs and gave negative simulation fits on measured records. For an
+///    unstable `A` the simulation diverges, and `B`, `D` come from the state
+///    equations instead ([`InputMethod`]).
+/// 4. `Q`, `R`, `S` are the covariance of the residuals
+///    `[X_{i+1} - A X_i - B U_i; Y_i - C X_i - D U_i]` with `X_i = Gamma_i^+ O_i` and
+///    `X_{i+1} = Gamma_{i-1}^+ O_{i-1}` (a Gram matrix, so PSD by construction);
+///    `h = mean(y) - G(1) mean(u)` with `G(1) = C (I - A)^{-1} B + D`.
+/// 5. [`Order::Auto`] runs 2-4 for every candidate order and keeps the one that
+///    minimises the [`Criterion`] (each candidate's exact log-likelihood by the Kalman
+///    filter); the singular values are returned for the user to inspect.
 ///
 /// # Complexity
-/// `O(T ((m + p) i)^2)` for the factorization, `O(((m + p) i)^3)` for the rest.
+/// `O(T ((m + p) i)^2)` for the factorization, `O(((m + p) i)^3)` for the projections,
+/// `O(T p (n + n m + p m)^2)` for the input least squares, and for [`Order::Auto`] one
+/// Kalman filter per candidate.
 ///
 /// # Errors
 /// [`SubspaceError::MissingData`] (first NaN output), [`SubspaceError::TooFewSamples`],
 /// [`SubspaceError::OrderTooLarge`], [`SubspaceError::InvalidOption`],
-/// [`SubspaceError::Data`] for non-finite inputs or mismatched lengths.
+/// [`SubspaceError::ConstantOutput`], [`SubspaceError::Data`] for non-finite inputs or
+/// mismatched lengths.
 ///
 /// # References
 /// P. Van Overschee and B. De Moor, *Subspace Identification for Linear Systems*,
-/// Kluwer, 1996.
+/// Kluwer, 1996. J. M. Maciejowski, "Guaranteed stability with subspace methods",
+/// Systems & Control Letters 26, 1995.
 pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, SubspaceError> {
     let (m, p, t_len) = (record.u.nrows(), record.y.nrows(), record.len());
     if p == 0 {
@@ -164,6 +284,99 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
             }
         }
     }
+    for out in 0..p {
+        let row = record.y.row(out);
+        if t_len > 0 && row.iter().all(|&v| v == row[0]) {
+            return Err(SubspaceError::ConstantOutput {
+                output: out + 1,
+                value: row[0],
+            });
+        }
+    }
+    let scales = Scales::of(record);
+    let scaled = scales.apply(record);
+    let result = identify(&scaled, options)?;
+    Ok(scales.undo(result))
+}
+
+/// Each signal's standard deviation over the record (1 for a constant input): N4SID
+/// identifies the signals scaled to unit variance, so that the SVD's weighting does
+/// not depend on the units of the columns (as SIPPY does), and the model is scaled
+/// back.
+struct Scales {
+    u: DVector<f64>,
+    y: DVector<f64>,
+    steps: usize,
+}
+
+impl Scales {
+    fn of(record: &Record) -> Scales {
+        let sd = |m: &DMatrix<f64>| {
+            DVector::from_fn(m.nrows(), |a, _| {
+                let row = m.row(a);
+                let mean = row.mean();
+                let var =
+                    row.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / row.len().max(1) as f64;
+                if var > 0.0 && var.is_finite() {
+                    var.sqrt()
+                } else {
+                    1.0
+                }
+            })
+        };
+        Scales {
+            u: sd(&record.u),
+            y: sd(&record.y),
+            steps: record.len(),
+        }
+    }
+
+    fn apply(&self, record: &Record) -> Record {
+        Record::new(
+            DMatrix::from_fn(record.u.nrows(), record.len(), |a, t| {
+                record.u[(a, t)] / self.u[a]
+            }),
+            DMatrix::from_fn(record.y.nrows(), record.len(), |b, t| {
+                record.y[(b, t)] / self.y[b]
+            }),
+        )
+    }
+
+    /// The model of the scaled signals as a model of the original ones:
+    /// `B Su^-1`, `Sy C`, `Sy D Su^-1`, `Sy h`, `Sy R Sy`, `S Sy`; the log-likelihoods
+    /// gain the Jacobian `-T sum ln sy`.
+    fn undo(&self, mut result: N4sidResult) -> N4sidResult {
+        let model = &result.model;
+        let (su_inv, sy) = (
+            DMatrix::from_diagonal(&self.u.map(|v| 1.0 / v)),
+            DMatrix::from_diagonal(&self.y),
+        );
+        result.model = model
+            .to_builder()
+            .b(model.b() * &su_inv)
+            .c(&sy * model.c())
+            .d(&sy * model.d() * &su_inv)
+            .h(&sy * model.h())
+            .r({
+                let mut r = &sy * model.r() * &sy;
+                sysid_linalg::symmetrize(&mut r);
+                r
+            })
+            .s(model.s() * &sy)
+            .build()
+            .expect("a congruent scaling keeps the model valid");
+        let jacobian = self.steps as f64 * self.y.iter().map(|v| v.ln()).sum::<f64>();
+        for score in &mut result.order_scores {
+            score.loglik -= jacobian;
+            score.criterion += 2.0 * jacobian;
+        }
+        result
+    }
+}
+
+/// [`n4sid`] on validated, scaled data.
+fn identify(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, SubspaceError> {
+    let (m, p, t_len) = (record.u.nrows(), record.y.nrows(), record.len());
     // Block rows: the user's choice, or a default that is shrunk to what the data
     // allow (T >= 2 (m + p) i + 2 i - 1 samples are needed for the factorization).
     let feasible = |i: usize| 2 * (m + p) * i + 2 * i - 1 <= t_len;
@@ -227,72 +440,209 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
     let u_rows = |k0: usize, k1: usize| k0 * m..k1 * m;
     let y_rows = |k0: usize, k1: usize| 2 * m * i + k0 * p..2 * m * i + k1 * p;
 
-    // ---- O_i = Y_f /_{U_f} W_p and its SVD ----
-    let o_i = oblique(
-        &rows(&k, &[y_rows(i, 2 * i)]),
-        &rows(&k, &[u_rows(i, 2 * i)]),
-        &rows(&k, &[u_rows(0, i), y_rows(0, i)]),
-    );
-    let svd = o_i.clone().svd(true, false);
-    let u_svd = svd.u.expect("requested");
-    let mut order_idx: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order_idx.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
-    let singular_values: Vec<f64> = order_idx.iter().map(|&k| svd.singular_values[k]).collect();
-    let n = match options.order {
-        Order::Fixed(n) => n,
-        Order::Auto => auto_order(&singular_values, 20),
+    // ---- O_i = Y_f /_{U_f} W_p and the weighted SVD ----
+    let y_future = rows(&k, &[y_rows(i, 2 * i)]);
+    let perp = perp_projector(&rows(&k, &[u_rows(i, 2 * i)]), r_h);
+    let (o_i, o_weights) = oblique(&y_future, &perp, &rows(&k, &[u_rows(0, i), y_rows(0, i)]));
+    let svd = WeightedSvd::new(options.weighting, &o_i, &perp, &(&y_future * &perp), j);
+    let singular_values = svd.singular_values.clone();
+    let usable = singular_values.iter().filter(|&&s| s > 0.0).count();
+    let centred = Centred {
+        u: DMatrix::from_fn(m, t_len, |a, t| record.u[(a, t)] - u_mean[a]),
+        y: DMatrix::from_fn(p, t_len, |b, t| record.y[(b, t)] - y_mean[b]),
+        u_mean,
+        y_mean,
     };
-    if n > singular_values.len() || singular_values[n - 1] <= 0.0 {
+    let projections = Projections {
+        svd: &svd,
+        o_weights: &o_weights,
+        block_rows: i,
+        columns: j,
+    };
+    let candidates: Vec<usize> = match options.order {
+        Order::Fixed(n) => vec![n],
+        Order::Auto => (1..=usable.min(p * i - 1).min(AUTO_MAX_ORDER)).collect(),
+    };
+    if candidates.is_empty() || candidates.iter().any(|&n| n > usable) {
         return Err(SubspaceError::OrderTooLarge {
-            order: n,
+            order: candidates.first().copied().unwrap_or(1),
             block_rows: i,
-            max: singular_values.iter().filter(|&&s| s > 0.0).count(),
+            max: usable,
         });
     }
-    let gamma = DMatrix::from_fn(p * i, n, |row, col| {
-        u_svd[(row, order_idx[col])] * singular_values[col].sqrt()
-    });
-    let x_i = pinv(&gamma) * &o_i;
-    // ---- X_{i+1} from O_{i-1} = Y_f^- /_{U_f^-} W_p^+ ----
-    let o_prev = oblique(
-        &rows(&k, &[y_rows(i + 1, 2 * i)]),
-        &rows(&k, &[u_rows(i + 1, 2 * i)]),
-        &rows(&k, &[u_rows(0, i + 1), y_rows(0, i + 1)]),
-    );
-    let gamma_prev = gamma.rows(0, p * (i - 1)).clone_owned();
-    let x_next = pinv(&gamma_prev) * o_prev;
+    let mut order_scores = Vec::new();
+    let mut best: Option<(f64, Estimate)> = None;
+    let mut workspace = sysid_kalman::KalmanWorkspace::new();
+    for &n in &candidates {
+        let estimate = estimate_order(n, &projections, &centred, options)?;
+        if candidates.len() == 1 {
+            best = Some((0.0, estimate));
+            break;
+        }
+        let loglik = workspace
+            .loglik(&estimate.model, record)
+            .ok()
+            .filter(|l| l.is_finite())
+            .unwrap_or(f64::NEG_INFINITY);
+        let parameters = n * (2 * p + m) + p * m + p * (p + 1) / 2;
+        let penalty = match options.criterion {
+            Criterion::Aic => 2.0,
+            Criterion::Bic => (t_len as f64).ln(),
+        };
+        let criterion = -2.0 * loglik + penalty * parameters as f64;
+        order_scores.push(OrderScore {
+            order: n,
+            loglik,
+            parameters,
+            criterion,
+            spectral_radius: estimate.spectral_radius,
+        });
+        if best.as_ref().is_none_or(|(c, _)| criterion < *c) {
+            best = Some((criterion, estimate));
+        }
+    }
+    let (_, estimate) = best.expect("at least one candidate");
+    Ok(N4sidResult {
+        order: estimate.model.n(),
+        model: estimate.model,
+        block_rows: i,
+        weighting: options.weighting,
+        singular_values,
+        spectral_radius: estimate.spectral_radius,
+        stabilised: estimate.stabilised,
+        input_method: estimate.input_method,
+        collinear_inputs: estimate.collinear_inputs,
+        order_scores,
+    })
+}
 
-    // ---- least squares for [[A, B], [C, D]] and the residual covariance ----
-    let mut lhs = DMatrix::zeros(n + p, r_h);
-    lhs.rows_mut(0, n).copy_from(&x_next);
-    lhs.rows_mut(n, p).copy_from(&rows(&k, &[y_rows(i, i + 1)]));
-    let mut rhs = DMatrix::zeros(n + m, r_h);
-    rhs.rows_mut(0, n).copy_from(&x_i);
-    rhs.rows_mut(n, m).copy_from(&rows(&k, &[u_rows(i, i + 1)]));
+/// The largest order [`Order::Auto`] considers.
+const AUTO_MAX_ORDER: usize = 20;
+
+/// The record with its means removed, and the means.
+struct Centred {
+    u: DMatrix<f64>,
+    y: DMatrix<f64>,
+    u_mean: DVector<f64>,
+    y_mean: DVector<f64>,
+}
+
+/// What every candidate order is computed from.
+struct Projections<'a> {
+    svd: &'a WeightedSvd,
+    /// `L` with `O_i = L W_p`.
+    o_weights: &'a DMatrix<f64>,
+    block_rows: usize,
+    /// `j`, the Hankel matrices' column count.
+    columns: usize,
+}
+
+/// One order's model.
+struct Estimate {
+    model: LinearGaussianModel,
+    spectral_radius: f64,
+    stabilised: bool,
+    input_method: InputMethod,
+    collinear_inputs: bool,
+}
+
+/// The largest eigenvalue modulus of `a` (0 for an empty matrix).
+pub(crate) fn spectral_radius(a: &DMatrix<f64>) -> f64 {
+    if a.nrows() == 0 {
+        return 0.0;
+    }
+    a.complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, f64::max)
+}
+
+/// Steps 2-4 of [`n4sid`] at order `n`.
+fn estimate_order(
+    n: usize,
+    pr: &Projections<'_>,
+    centred: &Centred,
+    options: &N4sidOptions,
+) -> Result<Estimate, SubspaceError> {
+    let (m, p, i) = (centred.u.nrows(), centred.y.nrows(), pr.block_rows);
+    let gamma = pr.svd.observability(n);
+    let gamma_pinv = pinv(&gamma);
+    // the states X_i = Gamma^+ O_i as a time series over the Hankel columns
+    let states = time_states(&(&gamma_pinv * pr.o_weights), centred, i, pr.columns);
+    let cols = pr.columns - 1;
+    let x_now = states.columns(0, cols).clone_owned();
+    let x_after = states.columns(1, cols).clone_owned();
+    let y_now = centred.y.columns(i, cols).clone_owned();
+    let u_now = centred.u.columns(i, cols).clone_owned();
+    // [X_{t+1}; Y_t] = [[A, B], [C, D]] [X_t; U_t] + residual
+    let mut lhs = DMatrix::zeros(n + p, cols);
+    lhs.rows_mut(0, n).copy_from(&x_after);
+    lhs.rows_mut(n, p).copy_from(&y_now);
+    let mut rhs = DMatrix::zeros(n + m, cols);
+    rhs.rows_mut(0, n).copy_from(&x_now);
+    rhs.rows_mut(n, m).copy_from(&u_now);
     let theta = &lhs * pinv(&rhs);
-    let residual = &lhs - &theta * &rhs;
-    let mut noise = &residual * residual.transpose() / j as f64;
-    sysid_linalg::symmetrize(&mut noise);
-    let a = theta.view((0, 0), (n, n)).clone_owned();
-    let b = theta.view((0, n), (n, m)).clone_owned();
+    let mut a = theta.view((0, 0), (n, n)).clone_owned();
     let c = theta.view((n, 0), (p, n)).clone_owned();
-    let d = theta.view((n, n), (p, m)).clone_owned();
-    let mut p1 = &x_i * x_i.transpose() / j as f64;
+    let mut b = theta.view((0, n), (n, m)).clone_owned();
+    let mut d = theta.view((n, n), (p, m)).clone_owned();
+    let mut radius = spectral_radius(&a);
+    let mut stabilised = false;
+    if options.stable && radius >= 1.0 {
+        // Maciejowski: Gamma_i A = [Gamma_i(p+1:, :); 0] has a stable solution; B and
+        // D are then re-fitted to the state equations with this A
+        let mut padded = DMatrix::zeros(p * i, n);
+        padded
+            .rows_mut(0, p * (i - 1))
+            .copy_from(&gamma.rows(p, p * (i - 1)));
+        a = &gamma_pinv * padded;
+        radius = spectral_radius(&a);
+        stabilised = true;
+        let u_pinv = pinv(&u_now);
+        b = (&x_after - &a * &x_now) * &u_pinv;
+        d = (&y_now - &c * &x_now) * &u_pinv;
+    }
+    let mut input_method = InputMethod::StateEquations;
+    let mut collinear_inputs = m > 0 && rank(&u_now) < m;
+    if m > 0 && options.focus == Focus::Simulation && radius < 1.0 {
+        let fit = fit_inputs(&a, &c, &centred.u, &centred.y);
+        b = fit.b;
+        d = fit.d;
+        input_method = InputMethod::Simulation;
+        collinear_inputs = fit.rank_deficient;
+    }
+    let mut residual = DMatrix::zeros(n + p, cols);
+    residual
+        .rows_mut(0, n)
+        .copy_from(&(&x_after - &a * &x_now - &b * &u_now));
+    residual
+        .rows_mut(n, p)
+        .copy_from(&(&y_now - &c * &x_now - &d * &u_now));
+    if input_method == InputMethod::Simulation {
+        // B and D were not fitted to the state equations: the noise is what the
+        // residuals leave after any linear effect of the inputs at the same time, so
+        // that it does not carry the difference of the two input estimates
+        let on_inputs = &residual * pinv(&u_now);
+        residual -= on_inputs * &u_now;
+    }
+    let mut noise = &residual * residual.transpose() / cols as f64;
+    sysid_linalg::symmetrize(&mut noise);
+    let mut p1 = &x_now * x_now.transpose() / cols as f64;
     sysid_linalg::symmetrize(&mut p1);
     // h = mean(y) - G(1) mean(u)
     let h = if m == 0 {
-        y_mean.clone()
+        centred.y_mean.clone()
     } else {
         match (DMatrix::<f64>::identity(n, n) - &a)
             .lu()
-            .solve(&(&b * &u_mean))
+            .solve(&(&b * &centred.u_mean))
         {
-            Some(x) => &y_mean - &c * x - &d * &u_mean,
-            None => y_mean.clone(),
+            Some(x) => &centred.y_mean - &c * x - &d * &centred.u_mean,
+            None => centred.y_mean.clone(),
         }
     };
     let model = LinearGaussianModel::builder(
-        a.clone(),
+        a,
         c,
         noise.view((0, 0), (n, n)).clone_owned(),
         noise.view((n, n), (p, p)).clone_owned(),
@@ -304,18 +654,23 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
     .p1(p1)
     .build()
     .map_err(|e| SubspaceError::Numerical(format!("the estimated model is invalid: {e}")))?;
-    let spectral_radius = a
-        .complex_eigenvalues()
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, f64::max);
-    Ok(N4sidResult {
+    Ok(Estimate {
         model,
-        order: n,
-        block_rows: i,
-        singular_values,
-        spectral_radius,
+        spectral_radius: radius,
+        stabilised,
+        input_method,
+        collinear_inputs,
     })
+}
+
+/// Numerical rank of `m`'s rows.
+fn rank(m: &DMatrix<f64>) -> usize {
+    if m.nrows() == 0 || m.ncols() == 0 {
+        return 0;
+    }
+    let s = m.transpose().singular_values();
+    let tol = m.nrows().max(m.ncols()) as f64 * f64::EPSILON * s.max() * 1e3;
+    s.iter().filter(|&&v| v > tol).count()
 }
 
 fn non_finite(t: usize, what: &'static str, index: usize, value: f64) -> SubspaceError {

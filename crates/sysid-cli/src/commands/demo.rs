@@ -118,6 +118,7 @@ fn linear_part(seed: u64, json: bool) -> Result<LinearPart, CliError> {
         &N4sidOptions {
             order: Order::Fixed(8),
             block_rows: None,
+            ..Default::default()
         },
     )?;
     let n4sid_seconds = t0.elapsed().as_secs_f64();

@@ -113,7 +113,7 @@ fn initial_model(
             &file.record,
             &N4sidOptions {
                 order,
-                block_rows: None,
+                ..Default::default()
             },
         )?;
         // linear EM holds S fixed; start from the subspace model without it

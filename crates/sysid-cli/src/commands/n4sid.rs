@@ -3,19 +3,38 @@ use crate::error::CliError;
 use crate::files::write_output;
 use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
-use sysid::subspace::{N4sidOptions, Order, n4sid};
+use sysid::subspace::{
+    Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, Weighting, n4sid,
+};
 
 /// Options of `sysid n4sid`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
     #[command(flatten)]
     pub data: DataArgs,
-    /// Model order, or `auto` (the largest drop of the log singular values).
+    /// Model order, or `auto`: every order 1..=min(p i - 1, 20) is identified and the
+    /// one with the smallest information criterion (--criterion) is kept.
     #[arg(long, default_value = "auto")]
     pub order: String,
     /// Block rows of the Hankel matrices (default: max(10, ceil((n + 1) / p) + 1)).
     #[arg(long)]
     pub block_rows: Option<usize>,
+    /// SVD weighting: `moesp`, `n4sid` or `cva`.
+    #[arg(long, default_value = "moesp")]
+    pub weighting: String,
+    /// What B and D are fitted for: `prediction` (jointly with A, C on the state
+    /// equations; consistent with the noise model) or `simulation` (least squares on the
+    /// noise-free simulated output given A, C).
+    #[arg(long, default_value = "prediction")]
+    pub focus: String,
+    /// Criterion of `--order auto`: `bic` (-2 ln L + k ln T) or `aic` (-2 ln L + 2 k).
+    #[arg(long, default_value = "bic")]
+    pub criterion: String,
+    /// Enforce a stable A (Maciejowski's padded shift equation) when the estimate has
+    /// a pole on or outside the unit circle; without it such a model is written with a
+    /// warning.
+    #[arg(long)]
+    pub stable: bool,
     /// Where to write the model (JSON).
     #[arg(long)]
     pub out: PathBuf,
@@ -40,25 +59,124 @@ pub fn parse_order(order: &str) -> Result<Order, CliError> {
         })
 }
 
+/// The subspace options shared by `n4sid` and `fit lti --init n4sid`.
+pub fn subspace_options(
+    order: Order,
+    block_rows: Option<usize>,
+    weighting: &str,
+    focus: &str,
+    criterion: &str,
+    stable: bool,
+) -> Result<N4sidOptions, CliError> {
+    let focus = match focus.to_ascii_lowercase().as_str() {
+        "prediction" => Focus::Prediction,
+        "simulation" => Focus::Simulation,
+        _ => {
+            return Err(CliError::BadOption {
+                option: "--focus",
+                message: format!("unknown focus {focus:?} (known: prediction, simulation)"),
+            });
+        }
+    };
+    let weighting = Weighting::parse(weighting).ok_or_else(|| CliError::BadOption {
+        option: "--weighting",
+        message: format!("unknown weighting {weighting:?} (known: n4sid, moesp, cva)"),
+    })?;
+    let criterion = match criterion.to_ascii_lowercase().as_str() {
+        "bic" => Criterion::Bic,
+        "aic" => Criterion::Aic,
+        _ => {
+            return Err(CliError::BadOption {
+                option: "--criterion",
+                message: format!("unknown criterion {criterion:?} (known: bic, aic)"),
+            });
+        }
+    };
+    Ok(N4sidOptions {
+        order,
+        block_rows,
+        weighting,
+        focus,
+        stable,
+        criterion,
+    })
+}
+
+/// Warnings a user needs about a subspace result.
+pub fn subspace_warnings(result: &N4sidResult, focus_simulation: bool) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if result.spectral_radius >= 1.0 {
+        warnings.push(format!(
+            "the identified A is unstable (spectral radius {:.4}): simulations of this model \
+             diverge; rerun with --stable to enforce a stable A, or try another order",
+            result.spectral_radius
+        ));
+    }
+    if result.stabilised {
+        warnings.push(format!(
+            "A was unstable and was re-estimated to be stable (--stable; spectral radius now \
+             {:.4}); the stabilised A is biased",
+            result.spectral_radius
+        ));
+    }
+    if focus_simulation
+        && result.input_method == InputMethod::StateEquations
+        && result.model.m() > 0
+    {
+        warnings.push(
+            "--focus simulation was not possible (A is unstable, so its simulation diverges): \
+             B and D come from the state equations"
+                .into(),
+        );
+    }
+    if result.collinear_inputs {
+        warnings.push(
+            "the inputs are collinear (one is constant or a combination of others): B and D \
+             are the minimum-norm solution; drop the redundant input column"
+                .into(),
+        );
+    }
+    warnings
+}
+
 pub fn run(o: &Options) -> Result<(), CliError> {
-    let order = parse_order(&o.order)?;
-    let file = o.data.read()?;
-    let result = n4sid(
-        &file.record,
-        &N4sidOptions {
-            order,
-            block_rows: o.block_rows,
-        },
+    let options = subspace_options(
+        parse_order(&o.order)?,
+        o.block_rows,
+        &o.weighting,
+        &o.focus,
+        &o.criterion,
+        o.stable,
     )?;
+    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    let file = o.data.read()?;
+    let result = n4sid(&file.record, &options)?;
     let text =
         serde_json::to_string_pretty(&ModelSpec::from_model(&result.model)).expect("serialises");
     write_output(&o.out, o.force, &(text + "\n"))?;
+    let warnings = subspace_warnings(&result, options.focus == Focus::Simulation);
+    let scores: Vec<serde_json::Value> = result
+        .order_scores
+        .iter()
+        .map(|s| {
+            serde_json::json!({
+                "order": s.order, "loglik": s.loglik, "parameters": s.parameters,
+                "criterion": s.criterion, "spectral_radius": s.spectral_radius,
+            })
+        })
+        .collect();
     if o.json {
         crate::say(
             &serde_json::json!({
                 "command": "n4sid", "order": result.order, "block_rows": result.block_rows,
+                "weighting": result.weighting.name(),
                 "singular_values": result.singular_values, "spectral_radius": result.spectral_radius,
-                "out": o.out,
+                "stable": result.spectral_radius < 1.0, "stabilised": result.stabilised,
+                "input_method": match result.input_method {
+                    InputMethod::Simulation => "simulation",
+                    InputMethod::StateEquations => "state_equations",
+                },
+                "order_scores": scores, "warnings": warnings, "out": o.out,
             })
             .to_string(),
         );
@@ -70,13 +188,29 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             .map(|s| format!("{s:.4e}"))
             .collect();
         crate::say(&format!(
-            "order {} (block rows {}), spectral radius {:.4}; singular values {} ...; wrote {}",
+            "order {} (block rows {}, {} weighting), spectral radius {:.4}; singular values {} ...; wrote {}",
             result.order,
             result.block_rows,
+            result.weighting.name(),
             result.spectral_radius,
             shown.join(" "),
             o.out.display()
         ));
+        if !result.order_scores.is_empty() {
+            let table: Vec<String> = result
+                .order_scores
+                .iter()
+                .map(|s| format!("{}:{:.1}", s.order, s.criterion))
+                .collect();
+            crate::say(&format!(
+                "{} by order (smallest kept): {}",
+                o.criterion.to_ascii_uppercase(),
+                table.join(" ")
+            ));
+        }
+    }
+    for w in &warnings {
+        crate::warn(w);
     }
     Ok(())
 }

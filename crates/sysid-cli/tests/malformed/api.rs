@@ -126,6 +126,7 @@ fn bad_options_are_named() {
         &N4sidOptions {
             order: Order::Fixed(0),
             block_rows: None,
+            ..Default::default()
         },
     )
     .unwrap_err()
@@ -136,6 +137,7 @@ fn bad_options_are_named() {
         &N4sidOptions {
             order: Order::Fixed(2),
             block_rows: Some(30),
+            ..Default::default()
         },
     )
     .unwrap_err()

@@ -15,5 +15,5 @@ pub mod runner;
 
 pub use runner::{
     EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError, Termination,
-    relative_change, run_em,
+    relative_change, remaining_gain, run_em,
 };

@@ -30,6 +30,14 @@ pub trait EmAlgorithm {
     /// `log p(y | estimate)` (an E-step without the M-step), for the final estimate.
     fn loglik(&mut self, estimate: &Self::Estimate) -> Result<f64, Self::Error>;
 
+    /// The algorithm's own estimate of the log-likelihood still to gain after its last
+    /// step, for [`EmOptions::distance_tol`] (an accelerated EM knows it from the plain
+    /// EM steps inside its cycle); `None`, the default, lets the runner extrapolate the
+    /// trace ([`remaining_gain`]).
+    fn remaining_gain(&self) -> Option<f64> {
+        None
+    }
+
     /// Whether the E-step is exact, so that the likelihood must never decrease.
     fn is_exact(&self) -> bool {
         true
@@ -73,6 +81,14 @@ pub struct EmOptions {
     pub tol: f64,
     /// Exact EM stops when `l_k < l_{k-1} - monotonicity_tol |l_{k-1}|`. Default 1e-10.
     pub monotonicity_tol: f64,
+    /// Stop when the last iteration gained less than this many nats and the estimated
+    /// distance to the maximum is below it too ([`remaining_gain`]: Aitken's
+    /// extrapolation of the last three log-likelihoods, or
+    /// [`EmAlgorithm::remaining_gain`]);
+    /// `0` (the default) does not use it. Unlike the relative rule it means the same on
+    /// every data set, and a run crawling along a ridge (where the per-step gain is small
+    /// but steady) is not mistaken for a converged one.
+    pub distance_tol: f64,
 }
 
 impl Default for EmOptions {
@@ -81,6 +97,7 @@ impl Default for EmOptions {
             max_iterations: 1000,
             tol: 1e-6,
             monotonicity_tol: 1e-10,
+            distance_tol: 0.0,
         }
     }
 }
@@ -111,6 +128,7 @@ impl EmOptions {
         for (name, value) in [
             ("tol", self.tol),
             ("monotonicity_tol", self.monotonicity_tol),
+            ("distance_tol", self.distance_tol),
         ] {
             if !(value.is_finite() && value >= 0.0) {
                 return Err(OptionsError::BadTolerance { name, value });
@@ -183,6 +201,26 @@ pub struct EmResult<T, E> {
 /// The seed-002 relative change `(l - l_prev) / (0.5 |l + l_prev| + eps)`.
 pub fn relative_change(l: f64, l_prev: f64) -> f64 {
     (l - l_prev) / (0.5 * (l + l_prev).abs() + f64::EPSILON)
+}
+
+/// Aitken's estimate of the log-likelihood still to gain after `l2`, from three
+/// successive values `l0, l1, l2`: with the linear rate `rho = (l2 - l1) / (l1 - l0)`,
+/// `(l2 - l1) rho / (1 - rho)`. Infinite when the gains do not shrink (`rho >= 1`),
+/// zero when the last step gained nothing.
+pub fn remaining_gain(l0: f64, l1: f64, l2: f64) -> f64 {
+    let (d1, d2) = (l1 - l0, l2 - l1);
+    if d2 <= 0.0 {
+        return 0.0;
+    }
+    if d1 <= 0.0 {
+        return f64::INFINITY;
+    }
+    let rho = d2 / d1;
+    if rho >= 1.0 {
+        f64::INFINITY
+    } else {
+        d2 * rho / (1.0 - rho)
+    }
 }
 
 /// Runs EM from `initial`.
@@ -260,7 +298,17 @@ pub fn run_em<A: EmAlgorithm>(
                     );
                 }
             }
-            if options.tol > 0.0 && relative_change(l_current, l_prev).abs() < options.tol {
+            let near = options.distance_tol > 0.0
+                && l_current - l_prev < options.distance_tol
+                && match (algorithm.remaining_gain(), &trace[..]) {
+                    (Some(gain), _) => gain < options.distance_tol,
+                    (None, [.., l0, l1, l2]) => {
+                        remaining_gain(*l0, *l1, *l2) < options.distance_tol
+                    }
+                    _ => false,
+                };
+            if near || (options.tol > 0.0 && relative_change(l_current, l_prev).abs() < options.tol)
+            {
                 let termination = Termination::Converged;
                 return result(
                     current,

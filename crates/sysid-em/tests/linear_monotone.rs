@@ -97,6 +97,9 @@ fn case(seed: u64) -> (LinearGaussianModel, Vec<Record>, LinearEmSpec) {
         p1: rng.random_bool(0.5),
         // every fourth system: a floor above some of the true noise variances (>= 0.05)
         min_variance: if seed % 4 == 1 { 0.3 } else { 0.0 },
+        // every fourth system: a per-output floor on R, above some true variances
+        output_noise_floor: (seed % 4 == 2 && !s_free)
+            .then(|| nalgebra::DVector::from_fn(p, |i, _| 0.1 + 0.2 * i as f64)),
     };
     let start = truth
         .to_builder()
@@ -123,12 +126,28 @@ fn exact_em_never_decreases_the_likelihood() {
     let mut gains = Vec::new();
     let mut ecm_runs = 0;
     let mut floor_active = 0;
+    let (mut output_floor_runs, mut output_floor_active) = (0, 0);
     for seed in 0..200 {
         let (start, records, spec) = case(seed);
         ecm_runs += spec.needs_ecm() as usize;
         let result = fit(start, &records, spec.clone(), &options, &mut ());
         if spec.min_variance > 0.0 {
             floor_active += floor_holds(&result.estimate, &spec, seed) as usize;
+        }
+        if let Some(floor) = &spec.output_noise_floor
+            && spec.r != Covariance::Fixed
+        {
+            output_floor_runs += 1;
+            let r = result.estimate.r();
+            let whitened = DMatrix::from_fn(r.nrows(), r.ncols(), |i, j| {
+                r[(i, j)] / (floor[i] * floor[j]).sqrt()
+            });
+            let low = nalgebra::SymmetricEigen::new(whitened).eigenvalues.min();
+            assert!(
+                low >= 1.0 - 1e-9,
+                "seed {seed}: R below its output floor ({low})"
+            );
+            output_floor_active += (low <= 1.0 + 1e-9) as usize;
         }
         assert_eq!(
             result.termination,
@@ -154,6 +173,11 @@ fn exact_em_never_decreases_the_likelihood() {
     assert!(ecm_runs > 50, "the mix must exercise the conditional route");
     eprintln!("runs ending on the variance floor: {floor_active}/50");
     assert!(floor_active >= 10, "the floor must bind in some runs");
+    eprintln!("runs ending on the output floor: {output_floor_active}/{output_floor_runs}");
+    assert!(
+        output_floor_active >= 5,
+        "the output floor must bind in some runs"
+    );
 }
 
 /// Asserts that the free noise covariances respect the floor; returns whether one of

@@ -24,5 +24,6 @@ mod weighting;
 pub use error::SubspaceError;
 pub use n4sid::{
     Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, OrderScore, auto_order, n4sid,
+    spectral_radius,
 };
 pub use weighting::Weighting;

@@ -546,8 +546,9 @@ struct Estimate {
     collinear_inputs: bool,
 }
 
-/// The largest eigenvalue modulus of `a` (0 for an empty matrix).
-pub(crate) fn spectral_radius(a: &DMatrix<f64>) -> f64 {
+/// The largest eigenvalue modulus of `a` (0 for an empty matrix); a model is stable
+/// when it is below 1.
+pub fn spectral_radius(a: &DMatrix<f64>) -> f64 {
     if a.nrows() == 0 {
         return 0.0;
     }

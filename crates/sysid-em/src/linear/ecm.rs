@@ -158,7 +158,11 @@ pub(super) fn m_step_ecm(
     } else {
         builder = builder
             .q(structured(e_ss, spec.q, model.q(), spec.min_variance))
-            .r(structured(e_oo, spec.r, model.r(), spec.min_variance));
+            .r(super::floor_output_noise(
+                structured(e_oo, spec.r, model.r(), spec.min_variance),
+                spec.r,
+                spec.output_noise_floor.as_ref(),
+            ));
     }
     builder = initial_state(builder, model, stats, spec);
     Ok(builder.build()?)

@@ -1,6 +1,6 @@
 //! The closed-form M-step of linear EM (the Cholesky route of Gibson and Ninness).
 
-use super::{Covariance, LinearEmError, LinearEmSpec, floor_variances};
+use super::{Covariance, LinearEmError, LinearEmSpec, floor_output_noise, floor_variances};
 use crate::regression::fit_block;
 use nalgebra::{DMatrix, DVector};
 use sysid_kalman::{LinearGaussianModel, SufficientStatistics};
@@ -107,7 +107,11 @@ pub fn m_step(
         if let Some(h) = &coef[2] {
             builder = builder.h(h.column(0).clone_owned());
         }
-        builder = builder.r(structured(cov, spec.r, model.r(), spec.min_variance));
+        builder = builder.r(floor_output_noise(
+            structured(cov, spec.r, model.r(), spec.min_variance),
+            spec.r,
+            spec.output_noise_floor.as_ref(),
+        ));
     }
 
     builder = initial_state(builder, model, stats, spec);

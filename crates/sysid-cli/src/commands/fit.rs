@@ -5,7 +5,17 @@ use crate::error::CliError;
 use crate::files::{read_model, write_output};
 use nalgebra::DVector;
 use std::path::{Path, PathBuf};
-use sysid::em::linear::{LinearEmSpec, fit, fit_squarem};
+use sysid::em::linear::{
+    LinearEmSpec, QuasiNewtonOptions, coordinate_count, fit, fit_squarem, maximise_loglik,
+};
+
+/// `--polish auto` polishes when the free coordinates are at most this many (each
+/// gradient costs twice as many filter passes).
+const POLISH_AUTO_MAX: usize = 60;
+
+/// With a polish to follow, EM hands over when it is this many nats from its maximum
+/// (by its own estimate).
+const POLISH_SWITCH_NATS: f64 = 0.1;
 use sysid::em::{EmOptions, Termination};
 use sysid::kalman::{LinearGaussianModel, ModelSpec};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
@@ -77,6 +87,11 @@ pub struct Options {
     /// of times fewer E-steps to the optimum); `none` runs plain EM.
     #[arg(long, default_value = "squarem", value_parser = ["squarem", "none"])]
     pub accelerate: String,
+    /// Linear EM: after EM, maximise the exact log-likelihood by BFGS (quasi-Newton,
+    /// superlinear near the maximum, where EM crawls): `auto` (the default) when the
+    /// free parameters number at most 60, `on`, `off`.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
+    pub polish: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
     #[arg(long, visible_alias = "iters", default_value_t = 500)]
@@ -266,7 +281,42 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let start = spec.project(&start)?;
     let mut progress = crate::progress::Progress::new(o.max_iter as u64, "fit lti", o.json);
     let records = std::slice::from_ref(&file.record);
+    let coordinates = coordinate_count(&start, &spec);
+    let polish_on = match o.polish.as_str() {
+        "on" => true,
+        "off" => false,
+        _ => coordinates > 0 && coordinates <= POLISH_AUTO_MAX,
+    };
+    // with a polish to follow, EM only needs to reach the maximum's neighbourhood
+    let options = if polish_on {
+        EmOptions {
+            distance_tol: options.distance_tol.max(POLISH_SWITCH_NATS),
+            ..options
+        }
+    } else {
+        options
+    };
+    // an output-error model (Q held at zero): EM cannot move A (the smoothed states
+    // are then a deterministic function of the parameters), so the likelihood is
+    // maximised directly
+    let output_error =
+        spec.q == sysid::em::linear::Covariance::Fixed && start.q().iter().all(|&v| v == 0.0);
+    let polish_on = polish_on || output_error;
     let (result, e_steps) = match o.accelerate.as_str() {
+        _ if output_error => {
+            let loglik = sysid::kalman::loglik_dataset(&start, records)
+                .map_err(|e| CliError::Em(e.into()))?;
+            let run = sysid::em::EmResult {
+                estimate: start,
+                loglik: Some(loglik),
+                trace: vec![loglik],
+                iterations: 0,
+                termination: Termination::Converged,
+                decreases: 0,
+                elapsed: std::time::Duration::ZERO,
+            };
+            (run, 0)
+        }
         "none" => {
             let run = fit(start, records, spec.clone(), &options, &mut progress);
             let e_steps = run.trace.len();
@@ -288,6 +338,27 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         }
     };
     progress.finish();
+    let mut result = result;
+    let mut polish = serde_json::Value::Null;
+    if polish_on
+        && result.loglik.is_some()
+        && !matches!(result.termination, Termination::Error { .. })
+    {
+        let outcome = maximise_loglik(
+            &result.estimate,
+            records,
+            &spec,
+            &QuasiNewtonOptions::default(),
+        )
+        .map_err(CliError::Em)?;
+        polish = serde_json::json!({
+            "coordinates": outcome.parameters, "iterations": outcome.iterations,
+            "evaluations": outcome.evaluations, "status": outcome.status,
+            "gain": outcome.loglik - outcome.loglik_before,
+        });
+        result.estimate = outcome.model;
+        result.loglik = Some(outcome.loglik);
+    }
     let stop = match &result.termination {
         Termination::Error { error, .. } => return Err(CliError::Em(error.clone())),
         Termination::Converged => "converged",
@@ -315,7 +386,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         o.json,
         serde_json::json!({
             "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
-            "e_steps": e_steps, "accelerate": o.accelerate,
+            "e_steps": e_steps, "accelerate": o.accelerate, "polish": polish,
             "termination": stop, "seconds": result.elapsed.as_secs_f64(), "out": o.out,
         }),
         || {

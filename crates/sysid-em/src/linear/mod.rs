@@ -26,10 +26,12 @@
 
 mod ecm;
 mod mstep;
+mod quasi_newton;
 mod spec;
 mod squarem;
 
 pub use mstep::m_step;
+pub use quasi_newton::{QuasiNewtonOptions, QuasiNewtonOutcome, coordinate_count, maximise_loglik};
 pub use squarem::SquaremLinearEm;
 
 pub use spec::{Covariance, FixedEntries, LinearEmSpec, floor_output_noise, floor_variances};

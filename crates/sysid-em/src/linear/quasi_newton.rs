@@ -1,0 +1,615 @@
+//! Quasi-Newton maximisation of the exact log-likelihood of a linear Gaussian model:
+//! the polish after EM, and the fit of models EM cannot move (output-error models,
+//! `Q = 0`).
+
+use super::{Covariance, LinearEmError, LinearEmSpec};
+use argmin::core::{CostFunction, Executor, Gradient, State};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::quasinewton::BFGS;
+use nalgebra::{DMatrix, DVector};
+use std::cell::RefCell;
+use sysid_kalman::{LinearGaussianModel, Record, loglik_dataset};
+
+/// Options of [`maximise_loglik`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct QuasiNewtonOptions {
+    /// BFGS iterations at most. Default 500.
+    pub max_iterations: u64,
+    /// Stop when the gradient's norm (of the log-likelihood per time step, in the
+    /// unconstrained coordinates) is below this. Default 1e-7.
+    pub tol_grad: f64,
+}
+
+impl Default for QuasiNewtonOptions {
+    fn default() -> Self {
+        QuasiNewtonOptions {
+            max_iterations: 500,
+            tol_grad: 1e-7,
+        }
+    }
+}
+
+/// What [`maximise_loglik`] did.
+#[derive(Debug, Clone)]
+pub struct QuasiNewtonOutcome {
+    /// The best model found (the start itself if nothing better was).
+    pub model: LinearGaussianModel,
+    /// `log p(y | start)`.
+    pub loglik_before: f64,
+    /// `log p(y | model)`.
+    pub loglik: f64,
+    /// Free parameters (unconstrained coordinates).
+    pub parameters: usize,
+    /// BFGS iterations.
+    pub iterations: u64,
+    /// Log-likelihood evaluations (Kalman filter passes).
+    pub evaluations: usize,
+    /// Why BFGS stopped (argmin's status), or why it did not run.
+    pub status: String,
+}
+
+/// One free block of the model in unconstrained coordinates.
+#[derive(Debug, Clone)]
+enum Block {
+    /// Free entries (column-major indices) of A, B, C, D (0..4) or h (4) or mu (5).
+    Entries { matrix: usize, indices: Vec<usize> },
+    /// A covariance `F^{1/2} (floor_one I + L L') F^{1/2}` with `L` lower triangular,
+    /// its diagonal stored as logarithms (full) or only its diagonal (diagonal; the
+    /// entries listed in `zeros` are structural zeros, held at 0).
+    Covariance {
+        which: usize,
+        full: bool,
+        scale: DVector<f64>,
+        floor_one: bool,
+        zeros: Vec<usize>,
+    },
+}
+
+/// The map between a model and a vector of unconstrained coordinates.
+#[derive(Debug, Clone)]
+struct Coordinates {
+    blocks: Vec<Block>,
+    start: LinearGaussianModel,
+}
+
+const Q_BLOCK: usize = 0;
+const R_BLOCK: usize = 1;
+const P1_BLOCK: usize = 2;
+
+fn matrix_of(model: &LinearGaussianModel, which: usize) -> DMatrix<f64> {
+    let column = |v: &DVector<f64>| DMatrix::from_column_slice(v.len(), 1, v.as_slice());
+    match which {
+        0 => model.a().clone(),
+        1 => model.b().clone(),
+        2 => model.c().clone(),
+        3 => model.d().clone(),
+        4 => column(model.h()),
+        _ => column(model.mu()),
+    }
+}
+
+fn covariance_of(model: &LinearGaussianModel, which: usize) -> DMatrix<f64> {
+    match which {
+        Q_BLOCK => model.q().clone(),
+        R_BLOCK => model.r().clone(),
+        _ => model.p1().clone(),
+    }
+}
+
+impl Coordinates {
+    /// The coordinates of `spec`'s free parameters at `start`, or why there are none.
+    fn new(start: &LinearGaussianModel, spec: &LinearEmSpec) -> Result<Coordinates, String> {
+        if spec.s {
+            return Err("not available with a free S".into());
+        }
+        let mut blocks = Vec::new();
+        let masks = [
+            (spec.a, &spec.fixed_entries.a),
+            (spec.b, &spec.fixed_entries.b),
+            (spec.c, &spec.fixed_entries.c),
+            (spec.d, &spec.fixed_entries.d),
+        ];
+        for (matrix, (free, mask)) in masks.into_iter().enumerate() {
+            if free {
+                let size = matrix_of(start, matrix).len();
+                let indices: Vec<usize> = (0..size)
+                    .filter(|&k| mask.as_ref().is_none_or(|m| !m[k]))
+                    .collect();
+                blocks.push(Block::Entries { matrix, indices });
+            }
+        }
+        for (matrix, free) in [(4, spec.h), (5, spec.mu)] {
+            if free {
+                let indices = (0..matrix_of(start, matrix).len()).collect();
+                blocks.push(Block::Entries { matrix, indices });
+            }
+        }
+        let (n, p) = (start.n(), start.p());
+        let covariances = [
+            (Q_BLOCK, spec.q, DVector::from_element(n, spec.min_variance)),
+            (
+                R_BLOCK,
+                spec.r,
+                match &spec.output_noise_floor {
+                    Some(f) => f.map(|v| v.max(spec.min_variance)),
+                    None => DVector::from_element(p, spec.min_variance),
+                },
+            ),
+            (
+                P1_BLOCK,
+                if spec.p1 {
+                    Covariance::Full
+                } else {
+                    Covariance::Fixed
+                },
+                DVector::zeros(n),
+            ),
+        ];
+        for (which, structure, floor) in covariances {
+            let full = match structure {
+                Covariance::Fixed => continue,
+                Covariance::Full => true,
+                Covariance::Diagonal => false,
+            };
+            let floor_one = floor.iter().all(|&v| v > 0.0);
+            let scale = if floor_one {
+                floor
+            } else {
+                DVector::from_element(floor.len(), 1.0)
+            };
+            let cov = covariance_of(start, which);
+            // variances at most 1e-12 of the largest are structural zeros (EM leaves
+            // rounding-level values where the start had exact zeros)
+            let largest = cov.diagonal().amax();
+            let zeros = if full || floor_one {
+                Vec::new()
+            } else {
+                (0..cov.nrows())
+                    .filter(|&i| cov[(i, i)] <= 1e-12 * largest)
+                    .collect()
+            };
+            blocks.push(Block::Covariance {
+                which,
+                full,
+                scale,
+                floor_one,
+                zeros,
+            });
+        }
+        Ok(Coordinates {
+            blocks,
+            start: start.clone(),
+        })
+    }
+
+    /// The coordinates of `model` (a full covariance on its floor, or singular, is
+    /// moved inside by a relative 1e-10 so that its Cholesky factor exists).
+    fn point(&self, model: &LinearGaussianModel) -> Vec<f64> {
+        let mut out = Vec::new();
+        for block in &self.blocks {
+            match block {
+                Block::Entries { matrix, indices } => {
+                    let m = matrix_of(model, *matrix);
+                    out.extend(indices.iter().map(|&k| m[k]));
+                }
+                Block::Covariance {
+                    which,
+                    full,
+                    scale,
+                    floor_one,
+                    zeros,
+                } => {
+                    let cov = covariance_of(model, *which);
+                    let d = cov.nrows();
+                    let mut inner =
+                        DMatrix::from_fn(d, d, |i, j| cov[(i, j)] / (scale[i] * scale[j]).sqrt());
+                    if *floor_one {
+                        inner -= DMatrix::identity(d, d);
+                    }
+                    let jitter = 1e-10 * inner.diagonal().amax().max(1e-300);
+                    if *full {
+                        inner += DMatrix::identity(d, d) * jitter;
+                        let l = nalgebra::Cholesky::new(inner.clone())
+                            .map(|c| c.l())
+                            .unwrap_or_else(|| {
+                                DMatrix::from_diagonal(
+                                    &inner.diagonal().map(|v| v.max(jitter).sqrt()),
+                                )
+                            });
+                        for j in 0..d {
+                            for i in j..d {
+                                out.push(if i == j { l[(i, i)].ln() } else { l[(i, j)] });
+                            }
+                        }
+                    } else {
+                        for i in (0..d).filter(|i| !zeros.contains(i)) {
+                            out.push(inner[(i, i)].max(jitter).ln());
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The model at `point`, or `None` if it is not a valid model.
+    fn model(&self, point: &[f64]) -> Option<LinearGaussianModel> {
+        let mut at = 0;
+        let mut builder = self.start.to_builder();
+        for block in &self.blocks {
+            match block {
+                Block::Entries { matrix, indices } => {
+                    let mut m = matrix_of(&self.start, *matrix);
+                    for &k in indices {
+                        m[k] = point[at];
+                        at += 1;
+                    }
+                    builder = match matrix {
+                        0 => builder.a(m),
+                        1 => builder.b(m),
+                        2 => builder.c(m),
+                        3 => builder.d(m),
+                        4 => builder.h(m.column(0).clone_owned()),
+                        _ => builder.mu(m.column(0).clone_owned()),
+                    };
+                }
+                Block::Covariance {
+                    which,
+                    full,
+                    scale,
+                    floor_one,
+                    zeros,
+                } => {
+                    let d = scale.len();
+                    let mut inner = if *full {
+                        let mut l = DMatrix::zeros(d, d);
+                        for j in 0..d {
+                            for i in j..d {
+                                l[(i, j)] = if i == j { point[at].exp() } else { point[at] };
+                                at += 1;
+                            }
+                        }
+                        &l * l.transpose()
+                    } else {
+                        let mut diag = DVector::zeros(d);
+                        for i in (0..d).filter(|i| !zeros.contains(i)) {
+                            diag[i] = point[at].exp();
+                            at += 1;
+                        }
+                        DMatrix::from_diagonal(&diag)
+                    };
+                    if *floor_one {
+                        inner += DMatrix::identity(d, d);
+                    }
+                    let mut cov =
+                        DMatrix::from_fn(d, d, |i, j| inner[(i, j)] * (scale[i] * scale[j]).sqrt());
+                    sysid_linalg::symmetrize(&mut cov);
+                    builder = match *which {
+                        Q_BLOCK => builder.q(cov),
+                        R_BLOCK => builder.r(cov),
+                        _ => builder.p1(cov),
+                    };
+                }
+            }
+        }
+        builder.build().ok()
+    }
+}
+
+/// The polish searches only where no free variance has collapsed below this (relative,
+/// see [`collapsed`]): a wall that keeps a boundary maximum from costing thousands of
+/// evaluations.
+const WALL: f64 = 1e-6;
+
+/// A polished model is kept only if its variances stay this far from collapse.
+const KEEP_ABOVE: f64 = 1e-6;
+
+/// Each output's sample variance over the observed steps.
+fn output_variances(records: &[Record]) -> DVector<f64> {
+    let p = records.first().map_or(0, |r| r.y.nrows());
+    DVector::from_fn(p, |i, _| {
+        let seen: Vec<f64> = records
+            .iter()
+            .flat_map(|r| r.y.row(i).iter().copied().collect::<Vec<_>>())
+            .filter(|v| v.is_finite())
+            .collect();
+        let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
+        seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len().max(1) as f64
+    })
+}
+
+/// BFGS restarts at most.
+const RESTARTS: usize = 5;
+
+/// The free covariance of `model` whose variance collapsed to (numerically) zero where
+/// `start`'s had not: `R` (or `Q`, `P1`) with smallest eigenvalue below
+/// output variances (for `R`; of its own largest eigenvalue for `Q` and `P1`) times
+/// `threshold`, structural zeros aside.
+fn collapsed(
+    start: &LinearGaussianModel,
+    model: &LinearGaussianModel,
+    spec: &LinearEmSpec,
+    var: &DVector<f64>,
+    threshold: f64,
+) -> Option<&'static str> {
+    let smallest = |m: &DMatrix<f64>, scale: Option<&DVector<f64>>| {
+        let kept: Vec<usize> = (0..m.nrows()).filter(|&i| m[(i, i)] > 0.0).collect();
+        if kept.is_empty() {
+            return f64::INFINITY;
+        }
+        let sub = DMatrix::from_fn(kept.len(), kept.len(), |i, j| {
+            let (a, b) = (kept[i], kept[j]);
+            let s = scale.map_or(1.0, |v| (v[a] * v[b]).sqrt().max(f64::MIN_POSITIVE));
+            m[(a, b)] / s
+        });
+        let e = nalgebra::SymmetricEigen::new(sub).eigenvalues;
+        if scale.is_some() {
+            e.min()
+        } else {
+            e.min() / e.amax().max(f64::MIN_POSITIVE)
+        }
+    };
+    let checks = [
+        (
+            "R",
+            spec.r != Covariance::Fixed,
+            start.r(),
+            model.r(),
+            Some(var),
+        ),
+        ("Q", spec.q != Covariance::Fixed, start.q(), model.q(), None),
+        ("P1", spec.p1, start.p1(), model.p1(), None),
+    ];
+    checks
+        .into_iter()
+        .find_map(|(name, free, before, after, scale)| {
+            (free && smallest(after, scale) < threshold && smallest(before, scale) >= threshold)
+                .then_some(name)
+        })
+}
+
+/// The cost of a point that is not a valid model (or whose filter fails): finite, so
+/// that the line search backtracks instead of stopping.
+const INVALID: f64 = 1e30;
+
+/// `-log p(y | theta) / T` and its central-difference gradient.
+struct NegativeLoglik<'a> {
+    coordinates: Coordinates,
+    records: &'a [Record],
+    scale: f64,
+    spec: LinearEmSpec,
+    variances: DVector<f64>,
+    /// The covariance whose collapse stopped the search, if one did.
+    wall: std::rc::Rc<RefCell<Option<&'static str>>>,
+    evaluations: std::rc::Rc<RefCell<usize>>,
+    /// The best point evaluated (a failed run keeps what it found).
+    best: std::rc::Rc<RefCell<Option<(f64, Vec<f64>)>>>,
+}
+
+impl NegativeLoglik<'_> {
+    fn value(&self, point: &[f64]) -> f64 {
+        *self.evaluations.borrow_mut() += 1;
+        let value = self
+            .coordinates
+            .model(point)
+            .filter(|m| {
+                collapsed(
+                    &self.coordinates.start,
+                    m,
+                    &self.spec,
+                    &self.variances,
+                    WALL,
+                )
+                .is_none()
+            })
+            .and_then(|m| loglik_dataset(&m, self.records).ok())
+            .filter(|l| l.is_finite())
+            .map_or(INVALID, |l| -l * self.scale);
+        let mut best = self.best.borrow_mut();
+        if value < INVALID && best.as_ref().is_none_or(|(b, _)| value < *b) {
+            *best = Some((value, point.to_vec()));
+        }
+        value
+    }
+}
+
+impl CostFunction for NegativeLoglik<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, point: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        let value = self.value(point);
+        match *self.wall.borrow() {
+            Some(which) => Err(argmin::core::Error::msg(format!("{which} collapsed"))),
+            None => Ok(value),
+        }
+    }
+}
+
+impl Gradient for NegativeLoglik<'_> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+
+    fn gradient(&self, point: &Vec<f64>) -> Result<Vec<f64>, argmin::core::Error> {
+        let mut shifted = point.clone();
+        let mut grad = vec![0.0; point.len()];
+        let centre = self.value(point);
+        if centre >= INVALID {
+            // a trial point outside the valid models: no direction from here (the
+            // line search backtracks on its infinite cost)
+            return Ok(grad);
+        }
+        for k in 0..point.len() {
+            let step = 1e-6 * point[k].abs().max(1e-2);
+            shifted[k] = point[k] + step;
+            let up = self.value(&shifted);
+            shifted[k] = point[k] - step;
+            let down = self.value(&shifted);
+            shifted[k] = point[k];
+            grad[k] = match (up < INVALID, down < INVALID) {
+                (true, true) => (up - down) / (2.0 * step),
+                // next to the edge of the valid models: one-sided
+                (true, false) => (up - centre) / step,
+                (false, true) => (centre - down) / step,
+                (false, false) => 0.0,
+            };
+        }
+        Ok(grad)
+    }
+}
+
+/// The number of unconstrained coordinates [`maximise_loglik`] would optimise (0 when it
+/// cannot run, e.g. with a free `S`): each gradient costs `2 k + 1` filter passes.
+pub fn coordinate_count(start: &LinearGaussianModel, spec: &LinearEmSpec) -> usize {
+    Coordinates::new(start, spec).map_or(0, |c| c.point(start).len())
+}
+
+/// Maximises the exact log-likelihood over the free parameters of `spec` from `start`
+/// by BFGS (argmin 0.11, More-Thuente line search) with central-difference gradients.
+///
+/// # Coordinates
+/// Entries of `A, B, C, D, h, mu` as they are; a free covariance as
+/// `F^{1/2} (I + L L') F^{1/2}` with the floor `F` of [`LinearEmSpec::min_variance`]
+/// and [`LinearEmSpec::output_noise_floor`] (without a floor, `L L'`), `L` lower
+/// triangular with a log diagonal (a diagonal covariance: log variances; a variance
+/// that is zero at the start, or at most 1e-12 of the largest, is a structural zero and
+/// is held at exactly zero, as EM holds it).
+/// So every point is a valid model in the spec. A free `S` is not supported.
+///
+/// # Why
+/// EM's convergence is linear, and slow where the likelihood is flat along a ridge or a
+/// variance is small; BFGS converges superlinearly near the maximum. And EM cannot move
+/// `A` when `Q = 0` (an output-error model: the smoothed states are then a
+/// deterministic function of `A`), where this maximises the likelihood directly.
+///
+/// The result is never worse than `start`.
+///
+/// # Cost
+/// `2 k + 1` Kalman filter passes per gradient for `k` free coordinates.
+pub fn maximise_loglik(
+    start: &LinearGaussianModel,
+    records: &[Record],
+    spec: &LinearEmSpec,
+    options: &QuasiNewtonOptions,
+) -> Result<QuasiNewtonOutcome, LinearEmError> {
+    let loglik_before = loglik_dataset(start, records)?;
+    let unchanged = |status: String, parameters| QuasiNewtonOutcome {
+        model: start.clone(),
+        loglik_before,
+        loglik: loglik_before,
+        parameters,
+        iterations: 0,
+        evaluations: 1,
+        status,
+    };
+    let coordinates = match Coordinates::new(start, spec) {
+        Ok(c) => c,
+        Err(why) => return Ok(unchanged(why, 0)),
+    };
+    let first = coordinates.point(start);
+    if first.is_empty() {
+        return Ok(unchanged("no free parameter".into(), 0));
+    }
+    let steps: usize = records.iter().map(|r| r.len()).sum();
+    let parameters = first.len();
+    let best_seen = std::rc::Rc::new(RefCell::new(None::<(f64, Vec<f64>)>));
+    let variances = output_variances(records);
+    let wall = std::rc::Rc::new(RefCell::new(None::<&'static str>));
+    let evaluations = std::rc::Rc::new(RefCell::new(0usize));
+    let (mut point, mut iterations, mut status) = (first, 0u64, String::new());
+    // BFGS, restarted from its best point with a fresh inverse Hessian when it stops
+    // short of convergence (a line search that fails near the edge of the valid
+    // models, the iteration limit) but still gained
+    for _ in 0..RESTARTS {
+        let value_before = best_seen.borrow().as_ref().map_or(f64::INFINITY, |b| b.0);
+        let problem = NegativeLoglik {
+            coordinates: coordinates.clone(),
+            records,
+            scale: 1.0 / steps.max(1) as f64,
+            spec: spec.clone(),
+            variances: variances.clone(),
+            wall: std::rc::Rc::clone(&wall),
+            evaluations: std::rc::Rc::clone(&evaluations),
+            best: std::rc::Rc::clone(&best_seen),
+        };
+        let solver = BFGS::new(MoreThuenteLineSearch::new())
+            .with_tolerance_grad(options.tol_grad)
+            .and_then(|s| s.with_tolerance_cost(0.0))
+            .map_err(|e| LinearEmError::InvalidSpec(e.to_string()))?;
+        let identity: Vec<Vec<f64>> = (0..parameters)
+            .map(|i| {
+                (0..parameters)
+                    .map(|j| f64::from(u8::from(i == j)))
+                    .collect()
+            })
+            .collect();
+        let budget = options.max_iterations.saturating_sub(iterations).max(1);
+        let run = Executor::new(problem, solver)
+            .configure(|state| {
+                state
+                    .param(point.clone())
+                    .inv_hessian(identity)
+                    .max_iters(budget)
+            })
+            .run();
+        let converged = match run {
+            Ok(r) => {
+                iterations += r.state.get_iter();
+                status = r.state.get_termination_status().to_string();
+                status.contains("converged")
+            }
+            Err(e) => {
+                status = format!("stopped: {e}");
+                false
+            }
+        };
+        let Some((value, best)) = best_seen.borrow().clone() else {
+            break;
+        };
+        if wall.borrow().is_some() {
+            break;
+        }
+        point = best;
+        let gained = value_before - value;
+        if converged || iterations >= options.max_iterations || gained <= 1e-12 * value.abs() {
+            break;
+        }
+    }
+    let evaluations = *evaluations.borrow();
+    let tracked = best_seen.borrow_mut().take().map(|(_, x)| x);
+    if let Some(model) = tracked.and_then(|p| coordinates.model(&p))
+        && let Ok(loglik) = loglik_dataset(&model, records)
+        && loglik.is_finite()
+        && loglik >= loglik_before
+    {
+        let hit = *wall.borrow();
+        if let Some(which) = hit.or(collapsed(start, &model, spec, &variances, KEEP_ABOVE)) {
+            return Ok(QuasiNewtonOutcome {
+                iterations,
+                evaluations,
+                ..unchanged(
+                    format!(
+                        "not kept: {which} headed to zero (the maximum is on the boundary of \
+                         the parameter set; {:.3} nats higher there)",
+                        loglik - loglik_before
+                    ),
+                    parameters,
+                )
+            });
+        }
+        return Ok(QuasiNewtonOutcome {
+            model,
+            loglik_before,
+            loglik,
+            parameters,
+            iterations,
+            evaluations,
+            status,
+        });
+    }
+    Ok(QuasiNewtonOutcome {
+        iterations,
+        evaluations,
+        ..unchanged(format!("{status} (no improvement kept)"), parameters)
+    })
+}

@@ -80,6 +80,14 @@ pub enum CliError {
     /// input (the better model was written).
     #[error("fit: {0}")]
     LikelihoodDecreased(String),
+    /// EM failed mid-run; the last good model and the trace so far were written.
+    #[error("fit: {message}")]
+    FitFailedMidRun {
+        /// What failed, and what was kept.
+        message: String,
+        /// Whether the failure is the input's (exit 2) rather than the computation's.
+        input: bool,
+    },
     #[error("{0}")]
     Subspace(#[from] sysid::subspace::SubspaceError),
     #[error("{0}")]
@@ -135,6 +143,7 @@ impl CliError {
         };
         let bad_input = match self {
             CliError::Io { .. } | CliError::LikelihoodDecreased(_) => false,
+            CliError::FitFailedMidRun { input, .. } => *input,
             // the data or the model is at fault, not the computation
             CliError::Kalman { source, .. } => matches!(
                 source,

@@ -10,8 +10,9 @@ use sysid::em::linear::{
 };
 
 /// `--polish auto` polishes when the free coordinates are at most this many (each
-/// gradient costs twice as many filter passes).
-const POLISH_AUTO_MAX: usize = 60;
+/// gradient costs twice as many filter passes; a black-box model of order 3 with one
+/// input and output already has 23).
+const POLISH_AUTO_MAX: usize = 20;
 
 /// With a polish to follow, EM hands over when it is this many nats from its maximum
 /// (by its own estimate).
@@ -89,7 +90,7 @@ pub struct Options {
     pub accelerate: String,
     /// Linear EM: after EM, maximise the exact log-likelihood by BFGS (quasi-Newton,
     /// superlinear near the maximum, where EM crawls): `auto` (the default) when the
-    /// free parameters number at most 60, `on`, `off`.
+    /// free parameters number at most 20 (structural models), `on`, `off`.
     #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
     pub polish: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
@@ -280,6 +281,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let start = apply(start, &mut spec, &fixes, &diagonal)?;
     let start = spec.project(&start)?;
     let mut progress = crate::progress::Progress::new(o.max_iter as u64, "fit lti", o.json);
+    let started = std::time::Instant::now();
     let records = std::slice::from_ref(&file.record);
     let coordinates = coordinate_count(&start, &spec);
     let polish_on = match o.polish.as_str() {
@@ -359,13 +361,51 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         result.estimate = outcome.model;
         result.loglik = Some(outcome.loglik);
     }
-    let stop = match &result.termination {
+    let failure = match &result.termination {
+        Termination::Error { error, iteration } if *iteration > 1 && result.loglik.is_some() => {
+            Some((error.clone(), *iteration))
+        }
         Termination::Error { error, .. } => return Err(CliError::Em(error.clone())),
+        _ => None,
+    };
+    let polished = polish["status"]
+        .as_str()
+        .is_some_and(|s| s.contains("converged"));
+    let stop = match &result.termination {
+        _ if polished => "converged",
+        Termination::Error { .. } => "error",
         Termination::Converged => "converged",
         Termination::MaxIterations => "max_iterations",
         Termination::LikelihoodDecreased { .. } => "likelihood_decreased",
         _ => "other",
     };
+    let mut warnings = Vec::new();
+    if stop == "max_iterations" {
+        let last_gain = match result.trace[..] {
+            [.., a, b] => b - a,
+            _ => f64::NAN,
+        };
+        warnings.push(format!(
+            "EM stopped at its iteration limit (--max-iter {}) with the log-likelihood still \
+             rising ({last_gain:.3e} nats in the last iteration): the estimate is not converged; \
+             raise --max-iter{}",
+            o.max_iter,
+            if polish_on {
+                ""
+            } else {
+                ", or let --polish on finish it"
+            }
+        ));
+    }
+    if let Some(status) = polish["status"].as_str()
+        && status.starts_with("not kept")
+    {
+        warnings.push(format!(
+            "the quasi-Newton polish {status}; bound the variances (--min-output-noise, \
+             --min-variance) for an interior maximum"
+        ));
+    }
+    warnings.extend(collapse_warnings(&result.estimate, &spec, &file));
     let user_initial = o.estimate_initial || fixes.iter().any(|f| f.name == "P1" || f.name == "mu");
     let written = if user_initial {
         result.estimate.clone()
@@ -381,23 +421,56 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         }
         write_output(path, o.force, &text)?;
     }
+    if let Some((error, iteration)) = failure {
+        let input = CliError::Em(error.clone()).exit_code() == 2;
+        return Err(CliError::FitFailedMidRun {
+            message: format!(
+                "EM failed at iteration {iteration}: {error}; the last good model (iteration {}, \
+                 log-likelihood {}) was written to {}{}; {}",
+                result.iterations,
+                result.loglik.unwrap_or(f64::NAN),
+                o.out.display(),
+                o.trace
+                    .as_ref()
+                    .map(|t| format!(" and the trace to {}", t.display()))
+                    .unwrap_or_default(),
+                decrease_diagnosis(&result.estimate, &file)
+            ),
+            input,
+        });
+    }
     let loglik = result.loglik.unwrap_or(f64::NEG_INFINITY);
     crate::report(
         o.json,
         serde_json::json!({
             "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
             "e_steps": e_steps, "accelerate": o.accelerate, "polish": polish,
-            "termination": stop, "seconds": result.elapsed.as_secs_f64(), "out": o.out,
+            "termination": stop, "em_termination": em_stop(&result.termination),
+            "seconds": started.elapsed().as_secs_f64(), "out": o.out, "warnings": warnings,
         }),
         || {
+            let polish_text = polish["status"]
+                .as_str()
+                .map(|status| {
+                    format!(
+                        "; polish: {status} (+{:.3e} nats)",
+                        polish["gain"].as_f64().unwrap_or(0.0)
+                    )
+                })
+                .unwrap_or_default();
             format!(
-                "loglik {loglik} after {} iterations ({stop}, {:.2} s); wrote {}",
+                "loglik {loglik} after {} EM iterations ({e_steps} E-steps, {}){polish_text}; \
+                 {stop} in {:.2} s; wrote {}",
                 result.iterations,
-                result.elapsed.as_secs_f64(),
+                em_stop(&result.termination),
+                started.elapsed().as_secs_f64(),
                 o.out.display()
             )
         },
     );
+    for w in &warnings {
+        crate::warn(w);
+    }
     if let Termination::LikelihoodDecreased {
         iteration,
         previous,
@@ -407,10 +480,133 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         return Err(CliError::LikelihoodDecreased(format!(
             "EM decreased the log-likelihood at iteration {iteration} ({previous} -> {current}); \
              the better model was written; {}",
-            decrease_diagnosis(&result.estimate)
+            decrease_diagnosis(&result.estimate, &file)
         )));
     }
     Ok(())
+}
+
+/// The EM runner's own termination, for the summary.
+fn em_stop(termination: &Termination<sysid::em::linear::LinearEmError>) -> &'static str {
+    match termination {
+        Termination::Converged => "converged",
+        Termination::MaxIterations => "max_iterations",
+        Termination::LikelihoodDecreased { .. } => "likelihood_decreased",
+        Termination::Error { .. } => "error",
+        _ => "other",
+    }
+}
+
+/// Warnings for free variances that have (numerically) collapsed to zero.
+fn collapse_warnings(
+    model: &LinearGaussianModel,
+    spec: &LinearEmSpec,
+    file: &crate::files::DataFile,
+) -> Vec<String> {
+    // a singular Q of several states is a valid model (an innovation form has rank p);
+    // a vanishing R, or the Q of a single state, is the degenerate boundary
+    singular_parts(model, file)
+        .into_iter()
+        .filter(|(name, _)| match *name {
+            "R" => spec.r != sysid::em::linear::Covariance::Fixed,
+            "Q" => spec.q != sysid::em::linear::Covariance::Fixed && model.n() == 1,
+            _ => false,
+        })
+        .map(|(name, what)| {
+            format!(
+                "{what}: the likelihood is rising towards a singular {name}, a boundary where \
+                 the estimate is not trustworthy; bound it ({})",
+                if name == "R" {
+                    "--min-output-noise 1e-4"
+                } else {
+                    "--min-variance"
+                }
+            )
+        })
+        .collect()
+}
+
+/// The noise covariances (and `P1`) of `model` that are numerically singular, each
+/// with a description: `R` relative to the outputs' sample variances (so a scalar `R`
+/// is caught too), `Q` and `P1` relative to the state's scale (the largest eigenvalue
+/// of `Q`, `P1` or the stationary covariance).
+fn singular_parts(
+    model: &LinearGaussianModel,
+    file: &crate::files::DataFile,
+) -> Vec<(&'static str, String)> {
+    let smallest = |m: &nalgebra::DMatrix<f64>| {
+        if m.nrows() == 0 {
+            return f64::INFINITY;
+        }
+        nalgebra::SymmetricEigen::new(m.clone()).eigenvalues.min()
+    };
+    let largest = |m: &nalgebra::DMatrix<f64>| {
+        if m.nrows() == 0 {
+            return 0.0;
+        }
+        nalgebra::SymmetricEigen::new(m.clone()).eigenvalues.max()
+    };
+    let y = &file.record.y;
+    let var = DVector::from_fn(y.nrows(), |i, _| {
+        let seen: Vec<f64> = y.row(i).iter().copied().filter(|v| v.is_finite()).collect();
+        let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
+        seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len().max(1) as f64
+    });
+    let r = model.r();
+    let whitened = nalgebra::DMatrix::from_fn(r.nrows(), r.ncols(), |i, j| {
+        r[(i, j)] / (var[i] * var[j]).sqrt().max(f64::MIN_POSITIVE)
+    });
+    let state_scale = largest(model.q())
+        .max(largest(model.p1()))
+        .max(largest(&with_stationary_initial_state(model).p1().clone()));
+    let mut out = Vec::new();
+    let r_low = smallest(&whitened);
+    if r_low < SINGULAR {
+        out.push((
+            "R",
+            format!("R's smallest variance is {r_low:.1e} of the outputs' variance"),
+        ));
+    }
+    for (name, m) in [("Q", model.q()), ("P1", model.p1())] {
+        // rows and columns that are exactly zero are structure (a deterministic state)
+        let kept: Vec<usize> = (0..m.nrows()).filter(|&i| m[(i, i)] != 0.0).collect();
+        let sub = nalgebra::DMatrix::from_fn(kept.len(), kept.len(), |i, j| m[(kept[i], kept[j])]);
+        let low = smallest(&sub);
+        if !kept.is_empty() && state_scale > 0.0 && low < SINGULAR * state_scale {
+            out.push((
+                name,
+                format!(
+                    "{name}'s smallest eigenvalue is {:.1e} of the state's scale",
+                    low / state_scale
+                ),
+            ));
+        }
+    }
+    out
+}
+
+/// A variance below this fraction of its scale is numerically zero for EM's
+/// statistics.
+const SINGULAR: f64 = 1e-10;
+
+/// Whether two or more inputs are collinear over the record (or one is constant):
+/// the smallest singular value of the centred inputs relative to the largest.
+fn collinear_inputs(file: &crate::files::DataFile) -> Option<String> {
+    let u = &file.record.u;
+    if u.nrows() < 1 || u.ncols() < 2 {
+        return None;
+    }
+    let centred =
+        nalgebra::DMatrix::from_fn(u.nrows(), u.ncols(), |i, t| u[(i, t)] - u.row(i).mean());
+    let s = centred.singular_values();
+    (s.min() <= 1e-10 * s.max().max(f64::MIN_POSITIVE)).then(|| {
+        format!(
+            "the inputs ({}) are collinear or one is constant (smallest/largest singular value \
+             {:.1e}): drop the redundant input column",
+            file.input_names.join(", "),
+            s.min() / s.max().max(f64::MIN_POSITIVE)
+        )
+    })
 }
 
 /// `R >= rel diag(var y)`: each output's sample variance over the observed steps.
@@ -474,37 +670,56 @@ fn with_stationary_initial_state(model: &LinearGaussianModel) -> LinearGaussianM
         .unwrap_or_else(|_| model.clone())
 }
 
-/// Why exact EM may have lowered the likelihood at `model`: a noise covariance that is
-/// numerically singular (the statistics no longer resolve its small direction), or, if
-/// none is, a request for a bug report.
-fn decrease_diagnosis(model: &sysid::kalman::LinearGaussianModel) -> String {
-    let ratio = |m: &nalgebra::DMatrix<f64>| {
-        let e = nalgebra::SymmetricEigen::new(m.clone()).eigenvalues;
-        e.min() / e.amax()
-    };
-    let singular: Vec<String> = [("Q", model.q()), ("R", model.r())]
+/// Why exact EM may have lowered the likelihood (or failed) at `model`: a noise
+/// covariance or `P1` that is numerically singular (the statistics no longer resolve
+/// its small direction), collinear inputs, or, if none of these, a request for a bug
+/// report.
+fn decrease_diagnosis(
+    model: &sysid::kalman::LinearGaussianModel,
+    file: &crate::files::DataFile,
+) -> String {
+    let mut causes: Vec<String> = singular_parts(model, file)
         .into_iter()
-        .filter(|(_, m)| m.nrows() > 0 && m.amax() > 0.0)
-        .map(|(name, m)| (name, ratio(m)))
-        .filter(|&(_, r)| r < 1e-10)
-        .map(|(name, r)| format!("{name} (smallest/largest eigenvalue {r:.1e})"))
+        .map(|(name, what)| {
+            format!(
+                "{what}: the likelihood is rising towards a singular {name}, where rounding \
+                 dominates the M-step; bound it ({})",
+                match name {
+                    "R" => "--min-output-noise 1e-4, or --min-variance",
+                    "Q" => "--min-variance (e.g. 1e-6 of the output variance)",
+                    _ => "do not estimate P1: drop --estimate-initial",
+                }
+            )
+        })
         .collect();
-    if singular.is_empty() {
+    causes.extend(collinear_inputs(file));
+    if causes.is_empty() {
         "this is a bug, please report it".into()
     } else {
-        format!(
-            "the likelihood is rising towards a singular {}, where rounding dominates the M-step: \
-             bound the variances with --min-variance (e.g. 1e-6 of the output variance)",
-            singular.join(" and ")
-        )
+        causes.join("; ")
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::decrease_diagnosis;
-    use nalgebra::dmatrix;
-    use sysid::kalman::LinearGaussianModel;
+    use crate::files::DataFile;
+    use nalgebra::{DMatrix, dmatrix};
+    use sysid::kalman::{LinearGaussianModel, Record};
+
+    fn file(u: DMatrix<f64>, y: DMatrix<f64>) -> DataFile {
+        DataFile {
+            input_names: (1..=u.nrows()).map(|i| format!("u{i}")).collect(),
+            output_names: (1..=y.nrows()).map(|i| format!("y{i}")).collect(),
+            time: (0..y.ncols()).map(|t| t as f64).collect(),
+            record: Record::new(u, y),
+        }
+    }
+
+    fn outputs() -> DataFile {
+        let y = DMatrix::from_fn(2, 50, |i, t| ((t * (i + 2)) as f64 * 0.7).sin());
+        file(DMatrix::zeros(0, 50), y)
+    }
 
     fn model(r_small: f64) -> LinearGaussianModel {
         LinearGaussianModel::builder(
@@ -519,13 +734,43 @@ mod tests {
 
     #[test]
     fn a_decrease_at_a_singular_r_points_to_the_variance_floor() {
-        let message = decrease_diagnosis(&model(1e-14));
-        assert!(
-            message.contains("singular R (smallest/largest eigenvalue 1.0e-14)"),
-            "{message}"
-        );
-        assert!(message.contains("--min-variance"), "{message}");
-        assert!(decrease_diagnosis(&model(0.1)).contains("bug"));
+        let message = decrease_diagnosis(&model(1e-14), &outputs());
+        assert!(message.contains("towards a singular R"), "{message}");
+        assert!(message.contains("--min-output-noise"), "{message}");
+        assert!(decrease_diagnosis(&model(0.1), &outputs()).contains("bug"));
+    }
+
+    #[test]
+    fn a_scalar_r_going_to_zero_is_named() {
+        let m = LinearGaussianModel::builder(
+            dmatrix![0.5],
+            dmatrix![1.0],
+            dmatrix![1.0],
+            dmatrix![1e-13],
+        )
+        .build()
+        .unwrap();
+        let y = DMatrix::from_fn(1, 50, |_, t| (t as f64 * 0.7).sin());
+        let message = decrease_diagnosis(&m, &file(DMatrix::zeros(0, 50), y));
+        assert!(message.contains("singular R"), "{message}");
+    }
+
+    #[test]
+    fn collinear_inputs_are_named() {
+        let m = LinearGaussianModel::builder(
+            dmatrix![0.5],
+            dmatrix![1.0],
+            dmatrix![1.0],
+            dmatrix![0.3],
+        )
+        .b(dmatrix![1.0, 1.0])
+        .build()
+        .unwrap();
+        let u = DMatrix::from_fn(2, 50, |_, t| (t as f64 * 0.3).sin());
+        let y = DMatrix::from_fn(1, 50, |_, t| (t as f64 * 0.7).sin());
+        let message = decrease_diagnosis(&m, &file(u, y));
+        assert!(message.contains("collinear"), "{message}");
+        assert!(message.contains("u1, u2"), "{message}");
     }
 
     #[test]

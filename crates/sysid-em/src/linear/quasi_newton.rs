@@ -299,10 +299,10 @@ impl Coordinates {
 /// The polish searches only where no free variance has collapsed below this (relative,
 /// see [`collapsed`]): a wall that keeps a boundary maximum from costing thousands of
 /// evaluations.
-const WALL: f64 = 1e-6;
+const WALL: f64 = 1e-10;
 
 /// A polished model is kept only if its variances stay this far from collapse.
-const KEEP_ABOVE: f64 = 1e-6;
+const KEEP_ABOVE: f64 = 1e-10;
 
 /// Each output's sample variance over the observed steps.
 fn output_variances(records: &[Record]) -> DVector<f64> {
@@ -318,54 +318,36 @@ fn output_variances(records: &[Record]) -> DVector<f64> {
     })
 }
 
+/// State shared between the runs of BFGS and the caller.
+type Shared<T> = std::rc::Rc<RefCell<T>>;
+
 /// BFGS restarts at most.
 const RESTARTS: usize = 5;
 
-/// The free covariance of `model` whose variance collapsed to (numerically) zero where
-/// `start`'s had not: `R` (or `Q`, `P1`) with smallest eigenvalue below
+/// Whether a free `R` of `model` has collapsed to (numerically) zero: its smallest
+/// eigenvalue, relative to the outputs' variances, below
 /// output variances (for `R`; of its own largest eigenvalue for `Q` and `P1`) times
 /// `threshold`, structural zeros aside.
 fn collapsed(
-    start: &LinearGaussianModel,
     model: &LinearGaussianModel,
     spec: &LinearEmSpec,
     var: &DVector<f64>,
     threshold: f64,
 ) -> Option<&'static str> {
-    let smallest = |m: &DMatrix<f64>, scale: Option<&DVector<f64>>| {
+    let smallest = |m: &DMatrix<f64>, scale: &DVector<f64>| {
         let kept: Vec<usize> = (0..m.nrows()).filter(|&i| m[(i, i)] > 0.0).collect();
         if kept.is_empty() {
             return f64::INFINITY;
         }
         let sub = DMatrix::from_fn(kept.len(), kept.len(), |i, j| {
             let (a, b) = (kept[i], kept[j]);
-            let s = scale.map_or(1.0, |v| (v[a] * v[b]).sqrt().max(f64::MIN_POSITIVE));
-            m[(a, b)] / s
+            m[(a, b)] / (scale[a] * scale[b]).sqrt().max(f64::MIN_POSITIVE)
         });
-        let e = nalgebra::SymmetricEigen::new(sub).eigenvalues;
-        if scale.is_some() {
-            e.min()
-        } else {
-            e.min() / e.amax().max(f64::MIN_POSITIVE)
-        }
+        nalgebra::SymmetricEigen::new(sub).eigenvalues.min()
     };
-    let checks = [
-        (
-            "R",
-            spec.r != Covariance::Fixed,
-            start.r(),
-            model.r(),
-            Some(var),
-        ),
-        ("Q", spec.q != Covariance::Fixed, start.q(), model.q(), None),
-        ("P1", spec.p1, start.p1(), model.p1(), None),
-    ];
-    checks
-        .into_iter()
-        .find_map(|(name, free, before, after, scale)| {
-            (free && smallest(after, scale) < threshold && smallest(before, scale) >= threshold)
-                .then_some(name)
-        })
+    // a singular Q or P1 is a valid model (an innovation-form Q has rank p); a singular
+    // R makes some output combination noise-free, the degenerate maximum
+    (spec.r != Covariance::Fixed && smallest(model.r(), var) < threshold).then_some("R")
 }
 
 /// The cost of a point that is not a valid model (or whose filter fails): finite, so
@@ -380,10 +362,10 @@ struct NegativeLoglik<'a> {
     spec: LinearEmSpec,
     variances: DVector<f64>,
     /// The covariance whose collapse stopped the search, if one did.
-    wall: std::rc::Rc<RefCell<Option<&'static str>>>,
+    wall: Shared<Option<&'static str>>,
     evaluations: std::rc::Rc<RefCell<usize>>,
     /// The best point evaluated (a failed run keeps what it found).
-    best: std::rc::Rc<RefCell<Option<(f64, Vec<f64>)>>>,
+    best: Shared<Option<(f64, Vec<f64>)>>,
 }
 
 impl NegativeLoglik<'_> {
@@ -393,14 +375,11 @@ impl NegativeLoglik<'_> {
             .coordinates
             .model(point)
             .filter(|m| {
-                collapsed(
-                    &self.coordinates.start,
-                    m,
-                    &self.spec,
-                    &self.variances,
-                    WALL,
-                )
-                .is_none()
+                let hit = collapsed(m, &self.spec, &self.variances, WALL);
+                if hit.is_some() && self.wall.borrow().is_none() {
+                    *self.wall.borrow_mut() = hit;
+                }
+                hit.is_none()
             })
             .and_then(|m| loglik_dataset(&m, self.records).ok())
             .filter(|l| l.is_finite())
@@ -510,6 +489,12 @@ pub fn maximise_loglik(
     if first.is_empty() {
         return Ok(unchanged("no free parameter".into(), 0));
     }
+    if let Some(which) = collapsed(start, spec, &output_variances(records), WALL) {
+        return Ok(unchanged(
+            format!("not run: {which} has already collapsed towards zero"),
+            first.len(),
+        ));
+    }
     let steps: usize = records.iter().map(|r| r.len()).sum();
     let parameters = first.len();
     let best_seen = std::rc::Rc::new(RefCell::new(None::<(f64, Vec<f64>)>));
@@ -583,7 +568,7 @@ pub fn maximise_loglik(
         && loglik >= loglik_before
     {
         let hit = *wall.borrow();
-        if let Some(which) = hit.or(collapsed(start, &model, spec, &variances, KEEP_ABOVE)) {
+        if let Some(which) = hit.or(collapsed(&model, spec, &variances, KEEP_ABOVE)) {
             return Ok(QuasiNewtonOutcome {
                 iterations,
                 evaluations,

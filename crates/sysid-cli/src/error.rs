@@ -153,13 +153,18 @@ impl CliError {
                     | KalmanError::EmptyRecord { .. }
                     | KalmanError::LengthMismatch { .. }
                     | KalmanError::Matrix(_)
+                    | KalmanError::InitialCovarianceTooLarge { .. }
             ),
             CliError::Plot(e) => !matches!(
                 e,
                 sysid_plot::PlotError::Io { .. } | sysid_plot::PlotError::Draw { .. }
             ),
             CliError::Subspace(e) => !matches!(e, SubspaceError::Numerical(_)),
-            CliError::Em(e) => !matches!(e, LinearEmError::Kalman(_) | LinearEmError::Linalg(_)),
+            CliError::Em(e) => match e {
+                LinearEmError::Kalman(KalmanError::InitialCovarianceTooLarge { .. }) => true,
+                LinearEmError::Kalman(_) | LinearEmError::Linalg(_) => false,
+                _ => true,
+            },
             CliError::Smc { source, .. } => smc_input(source),
             CliError::AffineEm { source, .. } => match source {
                 AffineEmError::Smc(e) => smc_input(e),

@@ -244,3 +244,56 @@ fn a_fixed_c_transforms_the_start() {
     ]);
     assert_one_line_error(&out, &["--fix", "C: no change of state basis"]);
 }
+
+/// A huge P1: up to 1e15 times the data's variance the square-root filter keeps its
+/// digits (P1 = 1e12 on the Nile: statsmodels 0.15.0 with the same known initial state
+/// gives -647.2800742147041); beyond, `loglik` and `fit` refuse it with a typed error
+/// instead of returning garbage (P1 = 1e300 used to "converge" to a = 1.6e-266).
+#[test]
+fn a_huge_p1_is_refused_not_garbage() {
+    let dir = scratch_dir();
+    let csv = data("nile.csv");
+    let with_p1 = |p1: &str| {
+        let path = dir.join(format!("p1_{p1}.json"));
+        std::fs::write(
+            &path,
+            format!(
+                r#"{{"a":[[1.0]],"c":[[1.0]],"q":[[1469.1]],"r":[[15099.0]],"mu":[1000.0],"p1":[[{p1}]]}}"#
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let model_1e12 = with_p1("1e12");
+    let out = summary(&sysid(&[
+        "loglik",
+        "--model",
+        s(&model_1e12),
+        "--data",
+        s(&csv),
+        "--json",
+    ]));
+    let loglik = out["loglik"].as_f64().unwrap();
+    assert!(
+        ((loglik - -647.2800742147041) / 647.28).abs() < 1e-8,
+        "{out}"
+    );
+    for p1 in ["1e30", "1e300"] {
+        let model = with_p1(p1);
+        let out = sysid(&["loglik", "--model", s(&model), "--data", s(&csv)]);
+        assert_one_line_error(&out, &["P1 is too large", "1e6 times"]);
+        let fitted = dir.join("fit.json");
+        let out = sysid(&[
+            "fit",
+            "lti",
+            "--init",
+            s(&model),
+            "--data",
+            s(&csv),
+            "--out",
+            s(&fitted),
+        ]);
+        assert_one_line_error(&out, &["P1 is too large"]);
+        assert!(!fitted.exists());
+    }
+}

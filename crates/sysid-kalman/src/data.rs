@@ -77,6 +77,31 @@ impl Record {
                 }
             }
         }
+        self.check_initial_scale(model)
+    }
+
+    /// Refuses a `P1` whose output variance `C P1 C'` exceeds 1e15 times the outputs'
+    /// largest sample variance: beyond it the first update cancels every digit (a
+    /// "diffuse" prior must be handled exactly, not by a huge number).
+    fn check_initial_scale(&self, model: &LinearGaussianModel) -> Result<()> {
+        let mut data: f64 = 0.0;
+        for row in self.y.row_iter() {
+            let seen: Vec<f64> = row.iter().copied().filter(|v| v.is_finite()).collect();
+            if seen.len() < 2 {
+                continue;
+            }
+            let mean = seen.iter().sum::<f64>() / seen.len() as f64;
+            let var = seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len() as f64;
+            data = data.max(var);
+        }
+        if data <= 0.0 {
+            return Ok(());
+        }
+        let prior = model.c() * model.p1() * model.c().transpose();
+        let largest = prior.diagonal().iter().copied().fold(0.0_f64, f64::max);
+        if largest > 1e15 * data || !largest.is_finite() {
+            return Err(KalmanError::InitialCovarianceTooLarge { largest, data });
+        }
         Ok(())
     }
 }

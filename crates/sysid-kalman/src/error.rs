@@ -73,6 +73,19 @@ pub enum KalmanError {
         /// Time step (1-based).
         time: usize,
     },
+    /// `P1` so large against the data that the filter loses its precision.
+    #[error(
+        "P1 is too large for the data: the initial state's output variance C P1 C' reaches \
+         {largest:.1e}, more than 1e15 times the outputs' largest sample variance ({data:.1e}), \
+         where the filter's first update loses every significant digit; use a P1 of about 1e6 \
+         times the outputs' variance (an exact diffuse initialisation is not available yet)"
+    )]
+    InitialCovarianceTooLarge {
+        /// The largest eigenvalue of `C P1 C'`.
+        largest: f64,
+        /// The largest sample variance of the outputs.
+        data: f64,
+    },
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]
     EmptyRecord {

@@ -103,8 +103,8 @@ pub fn basis_for_output_matrix(
         order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
         let mut out = DMatrix::zeros(n, n);
         out.rows_mut(0, rank).copy_from(m);
-        for k in 0..n - rank {
-            out.set_row(rank + k, &eigen.eigenvectors.column(order[k]).transpose());
+        for (k, &column) in order.iter().take(n - rank).enumerate() {
+            out.set_row(rank + k, &eigen.eigenvectors.column(column).transpose());
         }
         Some(out)
     };
@@ -180,11 +180,11 @@ pub fn apply(
             if c != *model.c() {
                 let t = basis_for_output_matrix(&model, &c).ok_or_else(|| CliError::BadOption {
                     option: "--fix",
-                    message: format!(
-                        "C: no change of state basis takes the start's C to the given one (they \
-                         must have the same rank, and with more outputs than states the same row \
-                         space); give a start model in the coordinates of this C (--init FILE)"
-                    ),
+                    message: "C: no change of state basis takes the start's C to the given one \
+                              (they must have the same rank, and with more outputs than states the \
+                              same row space); give a start model in the coordinates of this C \
+                              (--init FILE)"
+                        .into(),
                 })?;
                 model = transform_state(&model, &t).ok_or_else(|| CliError::BadOption {
                     option: "--fix",

@@ -8,12 +8,16 @@ use nalgebra::{DMatrix, DVector};
 use sysid::kalman::{LinearGaussianModel, ModelSpec, Record};
 use sysid::subspace::{Focus, N4sidOptions, Order, n4sid};
 
-const RECORDS: [&str; 5] = [
+const RECORDS: [&str; 8] = [
     "evaporator",
     "glassfurnace",
     "dryer2",
     "heating_system",
     "thermic_res_wall",
+    // three more measured records, found for this test (docs/reproducing.md)
+    "dryer",
+    "exchanger",
+    "CD_player_arm",
 ];
 
 fn data_dir() -> std::path::PathBuf {

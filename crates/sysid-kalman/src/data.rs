@@ -80,20 +80,30 @@ impl Record {
         self.check_initial_scale(model)
     }
 
+    /// Each output's sample variance over its observed (finite) values, `1/N`
+    /// normalised; 0 for an output with fewer than two observed values.
+    pub fn output_variances(&self) -> nalgebra::DVector<f64> {
+        nalgebra::DVector::from_fn(self.y.nrows(), |i, _| {
+            let seen: Vec<f64> = self
+                .y
+                .row(i)
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite())
+                .collect();
+            if seen.len() < 2 {
+                return 0.0;
+            }
+            let mean = seen.iter().sum::<f64>() / seen.len() as f64;
+            seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len() as f64
+        })
+    }
+
     /// Refuses a `P1` whose output variance `C P1 C'` exceeds 1e15 times the outputs'
     /// largest sample variance: beyond it the first update cancels every digit (a
     /// "diffuse" prior must be handled exactly, not by a huge number).
     fn check_initial_scale(&self, model: &LinearGaussianModel) -> Result<()> {
-        let mut data: f64 = 0.0;
-        for row in self.y.row_iter() {
-            let seen: Vec<f64> = row.iter().copied().filter(|v| v.is_finite()).collect();
-            if seen.len() < 2 {
-                continue;
-            }
-            let mean = seen.iter().sum::<f64>() / seen.len() as f64;
-            let var = seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len() as f64;
-            data = data.max(var);
-        }
+        let data = self.output_variances().iter().copied().fold(0.0, f64::max);
         if data <= 0.0 {
             return Ok(());
         }

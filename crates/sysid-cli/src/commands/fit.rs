@@ -546,12 +546,7 @@ fn singular_parts(
         }
         nalgebra::SymmetricEigen::new(m.clone()).eigenvalues.max()
     };
-    let y = &file.record.y;
-    let var = DVector::from_fn(y.nrows(), |i, _| {
-        let seen: Vec<f64> = y.row(i).iter().copied().filter(|v| v.is_finite()).collect();
-        let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
-        seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len().max(1) as f64
-    });
+    let var = file.record.output_variances();
     let r = model.r();
     let whitened = nalgebra::DMatrix::from_fn(r.nrows(), r.ncols(), |i, j| {
         r[(i, j)] / (var[i] * var[j]).sqrt().max(f64::MIN_POSITIVE)
@@ -617,13 +612,10 @@ fn output_noise_floor(
     if rel == 0.0 {
         return Ok(None);
     }
-    let y = &file.record.y;
-    let mut floor = DVector::zeros(y.nrows());
-    for i in 0..y.nrows() {
-        let seen: Vec<f64> = y.row(i).iter().copied().filter(|v| v.is_finite()).collect();
-        let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
-        let var = seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len().max(1) as f64;
-        if var.is_nan() || var <= 0.0 {
+    let variances = file.record.output_variances();
+    let mut floor = DVector::zeros(variances.len());
+    for (i, &var) in variances.iter().enumerate() {
+        if var <= 0.0 {
             let name = file
                 .output_names
                 .get(i)

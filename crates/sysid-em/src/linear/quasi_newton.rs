@@ -304,18 +304,12 @@ const WALL: f64 = 1e-10;
 /// A polished model is kept only if its variances stay this far from collapse.
 const KEEP_ABOVE: f64 = 1e-10;
 
-/// Each output's sample variance over the observed steps.
+/// Each output's sample variance over the observed steps of all records (the first
+/// record's when there are several: the scale of the data).
 fn output_variances(records: &[Record]) -> DVector<f64> {
-    let p = records.first().map_or(0, |r| r.y.nrows());
-    DVector::from_fn(p, |i, _| {
-        let seen: Vec<f64> = records
-            .iter()
-            .flat_map(|r| r.y.row(i).iter().copied().collect::<Vec<_>>())
-            .filter(|v| v.is_finite())
-            .collect();
-        let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
-        seen.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / seen.len().max(1) as f64
-    })
+    records
+        .first()
+        .map_or_else(|| DVector::zeros(0), Record::output_variances)
 }
 
 /// State shared between the runs of BFGS and the caller.

@@ -106,8 +106,8 @@ mod tests {
     use super::fit_inputs;
     use nalgebra::{DMatrix, dmatrix};
 
-    /// The fit reproduces a noise-free simulation's B, D and x0 exactly, across chunk
-    /// boundaries (T > CHUNK), against the dense normal equations solved directly.
+    /// The fit recovers a noise-free simulation's B, D and x0 exactly, across chunk
+    /// boundaries (T > CHUNK).
     #[test]
     fn recovers_a_noise_free_system() {
         let a = dmatrix![0.9, 0.2; -0.1, 0.7];

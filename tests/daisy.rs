@@ -226,3 +226,28 @@ fn simulation_focus_improves_the_evaporators_simulation_fit() {
         "{simulation} vs {prediction}"
     );
 }
+
+/// `Order::Auto` never picks an unstable candidate when a stable one exists: on the CD
+/// player arm orders 1 and 9 come out unstable, and the choice is stable.
+#[test]
+fn auto_order_prefers_stable_candidates() {
+    let split = load("CD_player_arm");
+    let result = n4sid(&split.estimation, &N4sidOptions::default()).unwrap();
+    assert!(
+        result.order_scores.iter().any(|s| s.spectral_radius >= 1.0),
+        "the rule must be exercised"
+    );
+    assert!(result.spectral_radius < 1.0, "order {}", result.order);
+    let chosen = result
+        .order_scores
+        .iter()
+        .find(|s| s.order == result.order)
+        .unwrap();
+    for s in result
+        .order_scores
+        .iter()
+        .filter(|s| s.spectral_radius < 1.0)
+    {
+        assert!(chosen.criterion <= s.criterion);
+    }
+}

@@ -14,7 +14,8 @@ pub enum Order {
     /// The order that minimises an information criterion over candidate orders
     /// `1 ..= min(p i - 1, 20)`: each candidate is identified in full and scored by
     /// its exact Gaussian log-likelihood on the record (Kalman filter) penalised by its
-    /// number of free parameters (see [`OrderScore`] and [`Criterion`]).
+    /// number of free parameters (see [`OrderScore`] and [`Criterion`]). Candidates
+    /// with an unstable `A` are scored but chosen only if no candidate is stable.
     Auto,
 }
 
@@ -471,7 +472,9 @@ fn identify(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Subs
         });
     }
     let mut order_scores = Vec::new();
+    // the best stable candidate, and the best of all (kept only if none is stable)
     let mut best: Option<(f64, Estimate)> = None;
+    let mut best_unstable: Option<(f64, Estimate)> = None;
     let mut workspace = sysid_kalman::KalmanWorkspace::new();
     for &n in &candidates {
         let estimate = estimate_order(n, &projections, &centred, options)?;
@@ -497,11 +500,16 @@ fn identify(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Subs
             criterion,
             spectral_radius: estimate.spectral_radius,
         });
-        if best.as_ref().is_none_or(|(c, _)| criterion < *c) {
-            best = Some((criterion, estimate));
+        let slot = if estimate.spectral_radius < 1.0 {
+            &mut best
+        } else {
+            &mut best_unstable
+        };
+        if slot.as_ref().is_none_or(|(c, _)| criterion < *c) {
+            *slot = Some((criterion, estimate));
         }
     }
-    let (_, estimate) = best.expect("at least one candidate");
+    let (_, estimate) = best.or(best_unstable).expect("at least one candidate");
     Ok(N4sidResult {
         order: estimate.model.n(),
         model: estimate.model,

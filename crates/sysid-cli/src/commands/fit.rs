@@ -71,6 +71,10 @@ pub struct Options {
     /// 80 % one-step prediction fit).
     #[arg(long)]
     pub full_r: bool,
+    /// `--init n4sid`: enforce a stable A in the subspace start (see `sysid n4sid
+    /// --stable`).
+    #[arg(long)]
+    pub stable: bool,
     /// Linear EM: also estimate the output offset h (by default h is held at the
     /// start's value: for `--init n4sid`, the record's mean output less the
     /// steady-state response to its mean input).
@@ -169,6 +173,7 @@ fn initial_model(
             &file.record,
             &N4sidOptions {
                 order,
+                stable: o.stable,
                 ..Default::default()
             },
         )?;
@@ -406,6 +411,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         ));
     }
     warnings.extend(collapse_warnings(&result.estimate, &spec, &file));
+    let radius = sysid::subspace::spectral_radius(result.estimate.a());
+    if radius >= 1.0 {
+        warnings.push(format!(
+            "the fitted A is unstable (spectral radius {radius:.4}): simulations of this model \
+             diverge; start from a stable model (--stable for the N4SID start) or try another \
+             order"
+        ));
+    }
     let user_initial = o.estimate_initial || fixes.iter().any(|f| f.name == "P1" || f.name == "mu");
     let written = if user_initial {
         result.estimate.clone()

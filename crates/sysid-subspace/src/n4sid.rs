@@ -297,7 +297,7 @@ pub fn n4sid(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Sub
     let scales = Scales::of(record);
     let scaled = scales.apply(record);
     let result = identify(&scaled, options)?;
-    Ok(scales.undo(result))
+    scales.undo(result)
 }
 
 /// Each signal's standard deviation over the record (1 for a constant input): N4SID
@@ -346,7 +346,7 @@ impl Scales {
     /// The model of the scaled signals as a model of the original ones:
     /// `B Su^-1`, `Sy C`, `Sy D Su^-1`, `Sy h`, `Sy R Sy`, `S Sy`; the log-likelihoods
     /// gain the Jacobian `-T sum ln sy`.
-    fn undo(&self, mut result: N4sidResult) -> N4sidResult {
+    fn undo(&self, mut result: N4sidResult) -> Result<N4sidResult, SubspaceError> {
         let model = &result.model;
         let (su_inv, sy) = (
             DMatrix::from_diagonal(&self.u.map(|v| 1.0 / v)),
@@ -365,13 +365,15 @@ impl Scales {
             })
             .s(model.s() * &sy)
             .build()
-            .expect("a congruent scaling keeps the model valid");
+            .map_err(|e| {
+                SubspaceError::Numerical(format!("the model scaled back is invalid: {e}"))
+            })?;
         let jacobian = self.steps as f64 * self.y.iter().map(|v| v.ln()).sum::<f64>();
         for score in &mut result.order_scores {
             score.loglik -= jacobian;
             score.criterion += 2.0 * jacobian;
         }
-        result
+        Ok(result)
     }
 }
 

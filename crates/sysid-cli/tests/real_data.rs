@@ -24,11 +24,7 @@ fn model(path: &std::path::Path) -> serde_json::Value {
 const KNOWN_DYNAMICS: [&str; 8] = ["--fix", "A", "--fix", "C", "--fix", "mu", "--fix", "P1"];
 
 /// Fits a model file's start with default settings and `extra` options (the fixes).
-fn fit_structural(
-    csv: &str,
-    start: &str,
-    extra: &[&str],
-) -> (serde_json::Value, serde_json::Value) {
+fn fit_from_file(csv: &str, start: &str, extra: &[&str]) -> (serde_json::Value, serde_json::Value) {
     let dir = scratch_dir();
     let out_file = dir.join("fit.json");
     let (csv, start) = (data(csv), data(start));
@@ -54,7 +50,7 @@ fn fit_structural(
 /// nats (measured: 2e-13); plain EM with the old relative rule stopped 0.011 short.
 #[test]
 fn nile_local_level_reaches_statsmodels_maximum() {
-    let (result, fitted) = fit_structural("nile.csv", "nile_start.json", &KNOWN_DYNAMICS);
+    let (result, fitted) = fit_from_file("nile.csv", "nile_start.json", &KNOWN_DYNAMICS);
     let loglik = result["loglik"].as_f64().unwrap();
     assert!((loglik - -641.5244362672844).abs() < 1e-3, "{result}");
     assert_eq!(result["termination"], "converged");
@@ -70,7 +66,7 @@ fn nile_local_level_reaches_statsmodels_maximum() {
 /// plain EM steps still 1.2e-3 nats short); the defaults (SQUAREM, then BFGS) reach it.
 #[test]
 fn co2_trend_and_seasonal_reach_statsmodels_maximum() {
-    let (result, fitted) = fit_structural(
+    let (result, fitted) = fit_from_file(
         "co2m.csv",
         "co2_start.json",
         &[KNOWN_DYNAMICS.as_slice(), &["--diag", "Q"]].concat(),
@@ -89,30 +85,13 @@ fn co2_trend_and_seasonal_reach_statsmodels_maximum() {
 /// -236.0629446078673 (truth a = 0.9, b = 0.5, R = 0.1).
 #[test]
 fn output_error_fit_moves_a_to_the_direct_optimum() {
-    let dir = scratch_dir();
-    let out_file = dir.join("oe.json");
-    let (csv, start) = (data("oe.csv"), data("oe_start.json"));
-    let result = summary(&sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&csv),
-        "--init",
-        s(&start),
-        "--fix",
-        "Q=0",
-        "--fix",
-        "C",
-        "--out",
-        s(&out_file),
-        "--json",
-    ]));
+    let (result, fitted) =
+        fit_from_file("oe.csv", "oe_start.json", &["--fix", "Q=0", "--fix", "C"]);
     let loglik = result["loglik"].as_f64().unwrap();
     assert!(
         ((loglik - -236.0629446078673) / 236.06).abs() < 1e-6,
         "{result}"
     );
-    let fitted = model(&out_file);
     let a = fitted["a"][0][0].as_f64().unwrap();
     let b = fitted["b"][0][0].as_f64().unwrap();
     let r = fitted["r"][0][0].as_f64().unwrap();
@@ -412,7 +391,7 @@ fn an_unstable_fit_is_flagged_and_the_named_options_fix_it() {
 /// stopped 0.019 nats short with Q 4.4 % off, 0.1200 against 0.1150).
 #[test]
 fn ar1_plus_noise_reaches_the_direct_optimum() {
-    let (result, fitted) = fit_structural(
+    let (result, fitted) = fit_from_file(
         "ar1.csv",
         "ar1_start.json",
         &["--fix", "C", "--fix", "mu", "--fix", "P1"],

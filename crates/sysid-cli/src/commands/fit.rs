@@ -249,24 +249,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         message: e.to_string(),
     })?;
     let file = o.data.read()?;
-    if !(o.min_variance.is_finite() && o.min_variance >= 0.0) {
-        return Err(CliError::BadOption {
-            option: "--min-variance",
-            message: format!(
-                "must be a finite non-negative number, got {}",
-                o.min_variance
-            ),
-        });
-    }
-    if !(o.min_output_noise.is_finite() && o.min_output_noise >= 0.0) {
-        return Err(CliError::BadOption {
-            option: "--min-output-noise",
-            message: format!(
-                "must be a finite non-negative number, got {}",
-                o.min_output_noise
-            ),
-        });
-    }
+    non_negative("--min-variance", o.min_variance)?;
+    non_negative("--min-output-noise", o.min_output_noise)?;
     let mut spec = LinearEmSpec {
         min_variance: o.min_variance,
         h: o.offset,
@@ -346,7 +330,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     };
     progress.finish();
     let mut result = result;
-    let mut polish = serde_json::Value::Null;
+    let mut polish = None;
     if polish_on
         && result.loglik.is_some()
         && !matches!(result.termination, Termination::Error { .. })
@@ -358,13 +342,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             &QuasiNewtonOptions::default(),
         )
         .map_err(CliError::Em)?;
-        polish = serde_json::json!({
-            "coordinates": outcome.parameters, "iterations": outcome.iterations,
-            "evaluations": outcome.evaluations, "status": outcome.status,
-            "gain": outcome.loglik - outcome.loglik_before,
-        });
-        result.estimate = outcome.model;
+        result.estimate = outcome.model.clone();
         result.loglik = Some(outcome.loglik);
+        polish = Some(outcome);
     }
     let failure = match &result.termination {
         Termination::Error { error, iteration } if *iteration > 1 && result.loglik.is_some() => {
@@ -373,16 +353,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         Termination::Error { error, .. } => return Err(CliError::Em(error.clone())),
         _ => None,
     };
-    let polished = polish["status"]
-        .as_str()
-        .is_some_and(|s| s.contains("converged"));
-    let stop = match &result.termination {
-        _ if polished => "converged",
-        Termination::Error { .. } => "error",
-        Termination::Converged => "converged",
-        Termination::MaxIterations => "max_iterations",
-        Termination::LikelihoodDecreased { .. } => "likelihood_decreased",
-        _ => "other",
+    let stop = if polish.as_ref().is_some_and(|p| p.converged) {
+        "converged"
+    } else {
+        em_stop(&result.termination)
     };
     let mut warnings = Vec::new();
     if stop == "max_iterations" {
@@ -402,12 +376,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             }
         ));
     }
-    if let Some(status) = polish["status"].as_str()
-        && status.starts_with("not kept")
-    {
+    if let Some(p) = polish.as_ref().filter(|p| p.boundary) {
         warnings.push(format!(
-            "the quasi-Newton polish {status}; bound the variances (--min-output-noise, \
-             --min-variance) for an interior maximum"
+            "the quasi-Newton polish {}; bound the variances (--min-output-noise, \
+             --min-variance) for an interior maximum",
+            p.status
         ));
     }
     warnings.extend(collapse_warnings(&result.estimate, &spec, &file));
@@ -457,17 +430,23 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         o.json,
         serde_json::json!({
             "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
-            "e_steps": e_steps, "accelerate": o.accelerate, "polish": polish,
+            "e_steps": e_steps, "accelerate": o.accelerate,
+            "polish": polish.as_ref().map(|p| serde_json::json!({
+                "coordinates": p.parameters, "iterations": p.iterations,
+                "evaluations": p.evaluations, "status": p.status, "converged": p.converged,
+                "gain": p.loglik - p.loglik_before,
+            })),
             "termination": stop, "em_termination": em_stop(&result.termination),
             "seconds": started.elapsed().as_secs_f64(), "out": o.out, "warnings": warnings,
         }),
         || {
-            let polish_text = polish["status"]
-                .as_str()
-                .map(|status| {
+            let polish_text = polish
+                .as_ref()
+                .map(|p| {
                     format!(
-                        "; polish: {status} (+{:.3e} nats)",
-                        polish["gain"].as_f64().unwrap_or(0.0)
+                        "; polish: {} (+{:.3e} nats)",
+                        p.status,
+                        p.loglik - p.loglik_before
                     )
                 })
                 .unwrap_or_default();
@@ -497,6 +476,17 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         )));
     }
     Ok(())
+}
+
+/// Refuses an option value that is not a finite non-negative number.
+fn non_negative(option: &'static str, value: f64) -> Result<(), CliError> {
+    if value.is_finite() && value >= 0.0 {
+        return Ok(());
+    }
+    Err(CliError::BadOption {
+        option,
+        message: format!("must be a finite non-negative number, got {value}"),
+    })
 }
 
 /// The EM runner's own termination, for the summary.

@@ -3,7 +3,7 @@
 //! `Q = 0`).
 
 use super::{Covariance, LinearEmError, LinearEmSpec};
-use argmin::core::{CostFunction, Executor, Gradient, State};
+use argmin::core::{CostFunction, Executor, Gradient, State, TerminationReason};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::BFGS;
 use nalgebra::{DMatrix, DVector};
@@ -46,6 +46,11 @@ pub struct QuasiNewtonOutcome {
     pub evaluations: usize,
     /// Why BFGS stopped (argmin's status), or why it did not run.
     pub status: String,
+    /// BFGS met its gradient tolerance and its result was kept.
+    pub converged: bool,
+    /// The search headed to a collapsing `R` (a maximum on the boundary of the
+    /// parameter set) and its result was not kept.
+    pub boundary: bool,
 }
 
 /// One free block of the model in unconstrained coordinates.
@@ -296,21 +301,11 @@ impl Coordinates {
     }
 }
 
-/// The polish searches only where no free variance has collapsed below this (relative,
-/// see [`collapsed`]): a wall that keeps a boundary maximum from costing thousands of
-/// evaluations.
+/// The polish searches only where a free `R` has not collapsed: below this fraction
+/// of the outputs' variances ([`r_collapsed`]) the search stops and its result is not
+/// kept, so a boundary maximum costs neither thousands of evaluations nor a degenerate
+/// model.
 const WALL: f64 = 1e-10;
-
-/// A polished model is kept only if its variances stay this far from collapse.
-const KEEP_ABOVE: f64 = 1e-10;
-
-/// Each output's sample variance over the observed steps of all records (the first
-/// record's when there are several: the scale of the data).
-fn output_variances(records: &[Record]) -> DVector<f64> {
-    records
-        .first()
-        .map_or_else(|| DVector::zeros(0), Record::output_variances)
-}
 
 /// State shared between the runs of BFGS and the caller.
 type Shared<T> = std::rc::Rc<RefCell<T>>;
@@ -318,30 +313,20 @@ type Shared<T> = std::rc::Rc<RefCell<T>>;
 /// BFGS restarts at most.
 const RESTARTS: usize = 5;
 
-/// Whether a free `R` of `model` has collapsed to (numerically) zero: its smallest
-/// eigenvalue, relative to the outputs' variances, below
-/// output variances (for `R`; of its own largest eigenvalue for `Q` and `P1`) times
-/// `threshold`, structural zeros aside.
-fn collapsed(
-    model: &LinearGaussianModel,
-    spec: &LinearEmSpec,
-    var: &DVector<f64>,
-    threshold: f64,
-) -> Option<&'static str> {
-    let smallest = |m: &DMatrix<f64>, scale: &DVector<f64>| {
-        let kept: Vec<usize> = (0..m.nrows()).filter(|&i| m[(i, i)] > 0.0).collect();
-        if kept.is_empty() {
-            return f64::INFINITY;
-        }
-        let sub = DMatrix::from_fn(kept.len(), kept.len(), |i, j| {
-            let (a, b) = (kept[i], kept[j]);
-            m[(a, b)] / (scale[a] * scale[b]).sqrt().max(f64::MIN_POSITIVE)
-        });
-        nalgebra::SymmetricEigen::new(sub).eigenvalues.min()
-    };
-    // a singular Q or P1 is a valid model (an innovation-form Q has rank p); a singular
-    // R makes some output combination noise-free, the degenerate maximum
-    (spec.r != Covariance::Fixed && smallest(model.r(), var) < threshold).then_some("R")
+/// Whether `r`'s smallest eigenvalue, relative to the outputs' variances `var`, is
+/// below [`WALL`] (exactly zero rows and columns aside). A singular `Q` or `P1` is a
+/// valid model (an innovation-form `Q` has rank `p`); a singular `R` makes some output
+/// combination noise-free, the degenerate maximum.
+fn r_collapsed(r: &DMatrix<f64>, var: &DVector<f64>) -> bool {
+    let kept: Vec<usize> = (0..r.nrows()).filter(|&i| r[(i, i)] > 0.0).collect();
+    if kept.is_empty() {
+        return false;
+    }
+    let sub = DMatrix::from_fn(kept.len(), kept.len(), |i, j| {
+        let (a, b) = (kept[i], kept[j]);
+        r[(a, b)] / (var[a] * var[b]).sqrt().max(f64::MIN_POSITIVE)
+    });
+    nalgebra::SymmetricEigen::new(sub).eigenvalues.min() < WALL
 }
 
 /// The cost of a point that is not a valid model (or whose filter fails): finite, so
@@ -353,11 +338,11 @@ struct NegativeLoglik<'a> {
     coordinates: Coordinates,
     records: &'a [Record],
     scale: f64,
-    spec: LinearEmSpec,
-    variances: DVector<f64>,
-    /// The covariance whose collapse stopped the search, if one did.
-    wall: Shared<Option<&'static str>>,
-    evaluations: std::rc::Rc<RefCell<usize>>,
+    /// The outputs' variances, when `R` is free (the wall is watched only then).
+    watch_r: Option<DVector<f64>>,
+    /// Whether a collapsing `R` stopped the search.
+    wall: Shared<bool>,
+    evaluations: Shared<usize>,
     /// The best point evaluated (a failed run keeps what it found).
     best: Shared<Option<(f64, Vec<f64>)>>,
 }
@@ -369,11 +354,14 @@ impl NegativeLoglik<'_> {
             .coordinates
             .model(point)
             .filter(|m| {
-                let hit = collapsed(m, &self.spec, &self.variances, WALL);
-                if hit.is_some() && self.wall.borrow().is_none() {
-                    *self.wall.borrow_mut() = hit;
+                let hit = self
+                    .watch_r
+                    .as_ref()
+                    .is_some_and(|var| r_collapsed(m.r(), var));
+                if hit {
+                    *self.wall.borrow_mut() = true;
                 }
-                hit.is_none()
+                !hit
             })
             .and_then(|m| loglik_dataset(&m, self.records).ok())
             .filter(|l| l.is_finite())
@@ -392,10 +380,10 @@ impl CostFunction for NegativeLoglik<'_> {
 
     fn cost(&self, point: &Vec<f64>) -> Result<f64, argmin::core::Error> {
         let value = self.value(point);
-        match *self.wall.borrow() {
-            Some(which) => Err(argmin::core::Error::msg(format!("{which} collapsed"))),
-            None => Ok(value),
+        if *self.wall.borrow() {
+            return Err(argmin::core::Error::msg("R collapsed"));
         }
+        Ok(value)
     }
 }
 
@@ -474,6 +462,8 @@ pub fn maximise_loglik(
         iterations: 0,
         evaluations: 1,
         status,
+        converged: false,
+        boundary: false,
     };
     let coordinates = match Coordinates::new(start, spec) {
         Ok(c) => c,
@@ -483,19 +473,26 @@ pub fn maximise_loglik(
     if first.is_empty() {
         return Ok(unchanged("no free parameter".into(), 0));
     }
-    if let Some(which) = collapsed(start, spec, &output_variances(records), WALL) {
+    // the outputs' variances (the first record's: the scale of the data)
+    let watch_r = (spec.r != Covariance::Fixed)
+        .then(|| records.first().map(Record::output_variances))
+        .flatten();
+    if watch_r
+        .as_ref()
+        .is_some_and(|var| r_collapsed(start.r(), var))
+    {
         return Ok(unchanged(
-            format!("not run: {which} has already collapsed towards zero"),
+            "not run: R has already collapsed towards zero".into(),
             first.len(),
         ));
     }
     let steps: usize = records.iter().map(|r| r.len()).sum();
     let parameters = first.len();
-    let best_seen = std::rc::Rc::new(RefCell::new(None::<(f64, Vec<f64>)>));
-    let variances = output_variances(records);
-    let wall = std::rc::Rc::new(RefCell::new(None::<&'static str>));
-    let evaluations = std::rc::Rc::new(RefCell::new(0usize));
+    let best_seen: Shared<Option<(f64, Vec<f64>)>> = Shared::default();
+    let wall: Shared<bool> = Shared::default();
+    let evaluations: Shared<usize> = Shared::default();
     let (mut point, mut iterations, mut status) = (first, 0u64, String::new());
+    let mut converged = false;
     // BFGS, restarted from its best point with a fresh inverse Hessian when it stops
     // short of convergence (a line search that fails near the edge of the valid
     // models, the iteration limit) but still gained
@@ -505,8 +502,7 @@ pub fn maximise_loglik(
             coordinates: coordinates.clone(),
             records,
             scale: 1.0 / steps.max(1) as f64,
-            spec: spec.clone(),
-            variances: variances.clone(),
+            watch_r: watch_r.clone(),
             wall: std::rc::Rc::clone(&wall),
             evaluations: std::rc::Rc::clone(&evaluations),
             best: std::rc::Rc::clone(&best_seen),
@@ -531,11 +527,11 @@ pub fn maximise_loglik(
                     .max_iters(budget)
             })
             .run();
-        let converged = match run {
+        converged = match run {
             Ok(r) => {
                 iterations += r.state.get_iter();
                 status = r.state.get_termination_status().to_string();
-                status.contains("converged")
+                r.state.get_termination_reason() == Some(&TerminationReason::SolverConverged)
             }
             Err(e) => {
                 status = format!("stopped: {e}");
@@ -545,7 +541,7 @@ pub fn maximise_loglik(
         let Some((value, best)) = best_seen.borrow().clone() else {
             break;
         };
-        if wall.borrow().is_some() {
+        if *wall.borrow() {
             break;
         }
         point = best;
@@ -561,15 +557,15 @@ pub fn maximise_loglik(
         && loglik.is_finite()
         && loglik >= loglik_before
     {
-        let hit = *wall.borrow();
-        if let Some(which) = hit.or(collapsed(&model, spec, &variances, KEEP_ABOVE)) {
+        if *wall.borrow() {
             return Ok(QuasiNewtonOutcome {
                 iterations,
                 evaluations,
+                boundary: true,
                 ..unchanged(
                     format!(
-                        "not kept: {which} headed to zero (the maximum is on the boundary of \
-                         the parameter set; {:.3} nats higher there)",
+                        "not kept: R headed to zero (the maximum is on the boundary of the \
+                         parameter set; {:.3} nats higher there)",
                         loglik - loglik_before
                     ),
                     parameters,
@@ -584,6 +580,8 @@ pub fn maximise_loglik(
             iterations,
             evaluations,
             status,
+            converged,
+            boundary: false,
         });
     }
     Ok(QuasiNewtonOutcome {

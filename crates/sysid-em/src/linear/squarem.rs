@@ -32,9 +32,11 @@ use sysid_kalman::{LinearGaussianModel, Record};
 /// least as high as `theta_2`).
 ///
 /// # Cost
-/// Three E-steps per cycle (`theta_0`, `theta_1`, `theta'`; a fallback adds one for
-/// `theta_2`) and one likelihood-only filter pass (`theta_2`). Along the slow ridges where EM crawls (small variances, offsets and
-/// levels that trade off) a cycle typically advances as far as tens of EM steps.
+/// Three E-steps per cycle: `theta_0`, `theta_1`, and `theta'` with a likelihood-only
+/// pass at `theta_2`, or `theta_2` itself after a fallback (whose extrapolation, if
+/// valid, cost a fourth). Along the slow ridges where EM crawls (small variances,
+/// offsets and levels that trade off) a cycle typically advances as far as tens of EM
+/// steps.
 ///
 /// # References
 /// R. Varadhan and C. Roland, "Simple and globally convergent methods for
@@ -74,67 +76,73 @@ impl<'a> SquaremLinearEm<'a> {
     /// `theta_0 - 2 alpha r + alpha^2 v` as a model in the spec, if it is one.
     fn extrapolate(
         &self,
-        theta: [&LinearGaussianModel; 3],
+        template: &LinearGaussianModel,
+        theta: [&[DMatrix<f64>; PARTS]; 3],
         alpha: f64,
     ) -> Option<LinearGaussianModel> {
-        let mix = |get: fn(&LinearGaussianModel) -> DMatrix<f64>| {
-            let (m0, m1, m2) = (get(theta[0]), get(theta[1]), get(theta[2]));
-            let r = &m1 - &m0;
-            let v = &m2 - 2.0 * &m1 + &m0;
-            m0 - 2.0 * alpha * r + alpha * alpha * v
-        };
-        let column = |m: DMatrix<f64>| m.column(0).clone_owned();
-        let mut q = mix(|m| m.q().clone());
-        let mut r = mix(|m| m.r().clone());
-        let mut p1 = mix(|m| m.p1().clone());
-        for cov in [&mut q, &mut r, &mut p1] {
-            sysid_linalg::symmetrize(cov);
-        }
-        let model = theta[0]
-            .to_builder()
-            .a(mix(|m| m.a().clone()))
-            .b(mix(|m| m.b().clone()))
-            .c(mix(|m| m.c().clone()))
-            .d(mix(|m| m.d().clone()))
-            .h(column(mix(|m| {
-                DMatrix::from_column_slice(m.p(), 1, m.h().as_slice())
-            })))
-            .mu(column(mix(|m| {
-                DMatrix::from_column_slice(m.n(), 1, m.mu().as_slice())
-            })))
-            .q(q)
-            .r(r)
-            .s(mix(|m| m.s().clone()))
-            .p1(p1)
-            .build()
-            .ok()?;
+        let mixed: [DMatrix<f64>; PARTS] = std::array::from_fn(|k| {
+            let (m0, m1, m2) = (&theta[0][k], &theta[1][k], &theta[2][k]);
+            m0 - 2.0 * alpha * (m1 - m0) + alpha * alpha * (m2 - 2.0 * m1 + m0)
+        });
+        let model = from_parts(template, mixed)?;
         self.em.spec.check(&model).ok()?;
         Some(model)
     }
 }
 
-/// The squared Euclidean distance between two models over all their matrices, and
-/// the same of the second difference.
-fn norms(theta: [&LinearGaussianModel; 3]) -> (f64, f64) {
-    let parts = |m: &LinearGaussianModel| -> Vec<DMatrix<f64>> {
-        vec![
-            m.a().clone(),
-            m.b().clone(),
-            m.c().clone(),
-            m.d().clone(),
-            DMatrix::from_column_slice(m.p(), 1, m.h().as_slice()),
-            m.q().clone(),
-            m.r().clone(),
-            m.s().clone(),
-            DMatrix::from_column_slice(m.n(), 1, m.mu().as_slice()),
-            m.p1().clone(),
-        ]
-    };
-    let (p0, p1, p2) = (parts(theta[0]), parts(theta[1]), parts(theta[2]));
+/// How many matrices [`parts`] lists.
+const PARTS: usize = 10;
+
+/// A model's matrices in a fixed order, vectors as columns: `A, B, C, D, h, Q, R, S,
+/// mu, P1` (what SQUAREM extrapolates, entry by entry).
+fn parts(m: &LinearGaussianModel) -> [DMatrix<f64>; PARTS] {
+    let column = |v: &nalgebra::DVector<f64>| DMatrix::from_column_slice(v.len(), 1, v.as_slice());
+    [
+        m.a().clone(),
+        m.b().clone(),
+        m.c().clone(),
+        m.d().clone(),
+        column(m.h()),
+        m.q().clone(),
+        m.r().clone(),
+        m.s().clone(),
+        column(m.mu()),
+        m.p1().clone(),
+    ]
+}
+
+/// The model with the matrices of [`parts`] (covariances symmetrised), if valid.
+fn from_parts(
+    template: &LinearGaussianModel,
+    parts: [DMatrix<f64>; PARTS],
+) -> Option<LinearGaussianModel> {
+    let [a, b, c, d, h, mut q, mut r, s, mu, mut p1] = parts;
+    for cov in [&mut q, &mut r, &mut p1] {
+        sysid_linalg::symmetrize(cov);
+    }
+    template
+        .to_builder()
+        .a(a)
+        .b(b)
+        .c(c)
+        .d(d)
+        .h(h.column(0).clone_owned())
+        .q(q)
+        .r(r)
+        .s(s)
+        .mu(mu.column(0).clone_owned())
+        .p1(p1)
+        .build()
+        .ok()
+}
+
+/// The squared norms of `r = theta_1 - theta_0` and `v = theta_2 - 2 theta_1 + theta_0`
+/// over all the matrices.
+fn norms(theta: [&[DMatrix<f64>; PARTS]; 3]) -> (f64, f64) {
     let (mut r2, mut v2) = (0.0, 0.0);
-    for k in 0..p0.len() {
-        r2 += (&p1[k] - &p0[k]).norm_squared();
-        v2 += (&p2[k] - 2.0 * &p1[k] + &p0[k]).norm_squared();
+    for ((m0, m1), m2) in theta[0].iter().zip(theta[1]).zip(theta[2]) {
+        r2 += (m1 - m0).norm_squared();
+        v2 += (m2 - 2.0 * m1 + m0).norm_squared();
     }
     (r2, v2)
 }
@@ -149,10 +157,9 @@ impl EmAlgorithm for SquaremLinearEm<'_> {
     ) -> Result<(LinearGaussianModel, f64), LinearEmError> {
         let (theta1, l0) = self.em_step(theta0)?;
         let (theta2, l1) = self.em_step(&theta1)?;
-        // the plain EM sequence's rate, for the stopping rule: one likelihood pass
-        let l2 = self.em.loglik(&theta2)?;
-        self.remaining = Some(crate::remaining_gain(l0, l1, l2));
-        let (r2, v2) = norms([theta0, &theta1, &theta2]);
+        let listed = [parts(theta0), parts(&theta1), parts(&theta2)];
+        let theta = [&listed[0], &listed[1], &listed[2]];
+        let (r2, v2) = norms(theta);
         let mut alpha = if v2 > 0.0 && r2 > 0.0 {
             -(r2 / v2).sqrt()
         } else {
@@ -164,11 +171,15 @@ impl EmAlgorithm for SquaremLinearEm<'_> {
         }
         let alpha = alpha.min(-1.0);
         if alpha < -1.0
-            && let Some(candidate) = self.extrapolate([theta0, &theta1, &theta2], alpha)
+            && let Some(candidate) = self.extrapolate(theta0, theta, alpha)
         {
             match self.em_step(&candidate) {
                 Ok((next, l_candidate)) if l_candidate.is_finite() && l_candidate >= l1 => {
                     self.accepted += 1;
+                    // the plain EM sequence's third value, for the stopping rule: one
+                    // likelihood pass
+                    let l2 = self.em.loglik(&theta2)?;
+                    self.remaining = Some(crate::remaining_gain(l0, l1, l2));
                     return Ok((next, l0));
                 }
                 _ => {}
@@ -178,7 +189,8 @@ impl EmAlgorithm for SquaremLinearEm<'_> {
         if alpha < -1.0 {
             self.alpha_max = (self.alpha_max / 4.0).max(1.0);
         }
-        let (next, _) = self.em_step(&theta2)?;
+        let (next, l2) = self.em_step(&theta2)?;
+        self.remaining = Some(crate::remaining_gain(l0, l1, l2));
         Ok((next, l0))
     }
 

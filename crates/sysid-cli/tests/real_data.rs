@@ -54,6 +54,8 @@ fn nile_local_level_reaches_statsmodels_maximum() {
     let loglik = result["loglik"].as_f64().unwrap();
     assert!((loglik - -641.5244362672844).abs() < 1e-3, "{result}");
     assert_eq!(result["termination"], "converged");
+    // A = 1 is held: its unit root is the model, not a warning
+    assert_eq!(result["warnings"], serde_json::json!([]), "{result}");
     let r = fitted["r"][0][0].as_f64().unwrap();
     let q = fitted["q"][0][0].as_f64().unwrap();
     assert!((r / 15098.696 - 1.0).abs() < 1e-3, "R {r}");

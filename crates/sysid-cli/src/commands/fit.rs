@@ -384,8 +384,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         ));
     }
     warnings.extend(collapse_warnings(&result.estimate, &spec, &file));
+    // an A the user held (a trend or seasonal model's unit roots) is theirs to choose
     let radius = sysid::subspace::spectral_radius(result.estimate.a());
-    if radius >= 1.0 {
+    if spec.a && radius >= 1.0 {
         warnings.push(format!(
             "the fitted A is unstable (spectral radius {radius:.4}): simulations of this model \
              diverge; start from a stable model (--stable for the N4SID start) or try another \

@@ -140,18 +140,21 @@ pub fn transform_state(
 }
 
 /// The value of a `--fix NAME=VALUE` as a matrix of `shape` (a scalar broadcast).
-fn fix_value(fix: &Fix, shape: (usize, usize)) -> Result<DMatrix<f64>, CliError> {
-    Ok(match &fix.value {
-        None => DMatrix::zeros(shape.0, shape.1),
-        Some(FixValue::Scalar(x)) => DMatrix::from_element(shape.0, shape.1, *x),
-        Some(FixValue::Rows(rows)) => {
+fn fix_value(
+    name: &str,
+    value: &FixValue,
+    shape: (usize, usize),
+) -> Result<DMatrix<f64>, CliError> {
+    Ok(match value {
+        FixValue::Scalar(x) => DMatrix::from_element(shape.0, shape.1, *x),
+        FixValue::Rows(rows) => {
             let cols = rows.first().map_or(0, Vec::len);
             if rows.iter().any(|r| r.len() != cols) || (rows.len(), cols) != shape {
                 return Err(CliError::BadOption {
                     option: "--fix",
                     message: format!(
                         "{}: expected a {}x{} value, got {}x{}",
-                        fix.name,
+                        name,
                         shape.0,
                         shape.1,
                         rows.len(),
@@ -175,8 +178,8 @@ pub fn apply(
 ) -> Result<LinearGaussianModel, CliError> {
     let mut model = model;
     for fix in fixes {
-        if let ("C", Some(FixValue::Rows(_) | FixValue::Scalar(_))) = (fix.name, &fix.value) {
-            let c = fix_value(fix, model.c().shape())?;
+        if let ("C", Some(value)) = (fix.name, &fix.value) {
+            let c = fix_value(fix.name, value, model.c().shape())?;
             if c != *model.c() {
                 let t = basis_for_output_matrix(&model, &c).ok_or_else(|| CliError::BadOption {
                     option: "--fix",
@@ -196,8 +199,8 @@ pub fn apply(
     let mut builder = model.to_builder();
     for fix in fixes {
         let shape = current(&model, fix.name).shape();
-        if fix.value.is_some() {
-            let m = fix_value(fix, shape)?;
+        if let Some(value) = &fix.value {
+            let m = fix_value(fix.name, value, shape)?;
             let v = DVector::from_column_slice(m.as_slice());
             builder = match fix.name {
                 "A" => builder.a(m),

@@ -78,13 +78,40 @@ pub enum KalmanError {
         "P1 is too large for the data: the initial state's output variance C P1 C' reaches \
          {largest:.1e}, more than 1e15 times the outputs' largest sample variance ({data:.1e}), \
          where the filter's first update loses every significant digit; use a P1 of about 1e6 \
-         times the outputs' variance (an exact diffuse initialisation is not available yet)"
+         times the outputs' variance, or the exact diffuse initialisation (`diffuse` directions; \
+         `--initial diffuse` on the command line)"
     )]
     InitialCovarianceTooLarge {
         /// The largest eigenvalue of `C P1 C'`.
         largest: f64,
         /// The largest sample variance of the outputs.
         data: f64,
+    },
+    /// Diffuse directions that are linearly dependent.
+    #[error(
+        "the {columns} diffuse directions of the initial state are linearly dependent (rank {rank}); \
+         give independent columns"
+    )]
+    DiffuseRank {
+        /// Columns of `A_d`.
+        columns: usize,
+        /// Their numerical rank.
+        rank: usize,
+    },
+    /// The record does not determine the diffuse part of the initial state, so the
+    /// diffuse likelihood and the smoothed states do not exist.
+    #[error(
+        "record {record}: the data do not determine the diffuse initial state (rank {rank} of \
+         {directions} directions): a state the outputs never see, or fewer observations than \
+         diffuse states; give it a proper initial law (P1) instead"
+    )]
+    DiffuseNotIdentified {
+        /// Record index (0-based).
+        record: usize,
+        /// Number of diffuse directions `q`.
+        directions: usize,
+        /// How many the data determine.
+        rank: usize,
     },
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]

@@ -1,7 +1,8 @@
 //! The square-root (array) Kalman filter: the default filter of this crate.
 
+use crate::diffuse::{DeltaPosterior, DiffuseColumns, PartialPosterior};
 use crate::{KalmanError, LinearGaussianModel, Record, Result, dense};
-use nalgebra::{DMatrix, DVectorView};
+use nalgebra::{DMatrix, DVector};
 use sysid_linalg::{
     LN_2PI, LogProduct, QrScratch, axpy, dot, solve_upper_rows, triangularize,
     triangularize_stacked_leading,
@@ -38,6 +39,11 @@ pub struct FilterOutput {
     pub(crate) cond_factor: Vec<f64>,
     /// whether step t reused the factor of step t-1 (steady state reached)
     pub(crate) reused: Vec<bool>,
+    /// the means' derivatives in the diffuse part of the initial state (`q = 0`
+    /// without one); the stored means and factors are those of `delta = 0`
+    pub(crate) diffuse: DiffuseColumns,
+    /// `delta` given the whole record (diffuse models)
+    pub(crate) delta: Option<DeltaPosterior>,
 }
 
 impl FilterOutput {
@@ -60,24 +66,32 @@ impl FilterOutput {
         self.reused.iter().filter(|&&r| r).count()
     }
     /// Predicted mean `x_{k+1|k}` (index `k` in `0..=T`).
-    pub fn predicted_mean(&self, k: usize) -> DVectorView<'_, f64> {
-        dense::vector_at(&self.pred_mean, k, self.n)
+    ///
+    /// With a diffuse initial state this is the limit of the mean as the diffuse
+    /// variance grows; see [`diffuse_steps`](Self::diffuse_steps).
+    pub fn predicted_mean(&self, k: usize) -> DVector<f64> {
+        let mean = dense::vector_at(&self.pred_mean, k, self.n).clone_owned();
+        self.with_delta_mean(mean, &self.diffuse.stored_pred, k, k)
     }
     /// Predicted covariance `P_{k+1|k}` (index `k` in `0..=T`), symmetric PSD by
-    /// construction (`U'U`).
+    /// construction (`U'U`, plus `X V X'` for the determined diffuse part).
     pub fn predicted_covariance(&self, k: usize) -> DMatrix<f64> {
         let n = self.n;
         let u = &self.pred_factor[k * n * n..(k + 1) * n * n];
         let mut p = DMatrix::zeros(n, n);
         dense::mul_tn(p.as_mut_slice(), u, u, n, n, n, false, &mut Vec::new());
-        p
+        self.with_delta_covariance(p, &self.diffuse.stored_pred, k, k)
     }
     /// Filtered mean `x_{k+1|k+1}` (index `k` in `0..T`).
-    pub fn filtered_mean(&self, k: usize) -> DVectorView<'_, f64> {
-        dense::vector_at(&self.filt_mean, k, self.n)
+    ///
+    /// With a diffuse initial state this is the limit of the mean as the diffuse
+    /// variance grows; see [`diffuse_steps`](Self::diffuse_steps).
+    pub fn filtered_mean(&self, k: usize) -> DVector<f64> {
+        let mean = dense::vector_at(&self.filt_mean, k, self.n).clone_owned();
+        self.with_delta_mean(mean, &self.diffuse.stored_filt, k, k + 1)
     }
     /// Filtered covariance `P_{k+1|k+1} = X33'X33 + J P_{k+2|k+1} J'` (index `k` in
-    /// `0..T`): a sum of PSD terms.
+    /// `0..T`): a sum of PSD terms (plus `X V X'` for the determined diffuse part).
     pub fn filtered_covariance(&self, k: usize) -> DMatrix<f64> {
         let n = self.n;
         let nn = n * n;
@@ -91,6 +105,86 @@ impl FilterOutput {
         dense::mul_nn(&mut uj, u, jt, n, n, n);
         dense::mul_tn(p.as_mut_slice(), &uj, &uj, n, n, n, true, &mut scratch);
         dense::symmetrize(p.as_mut_slice(), n);
+        self.with_delta_covariance(p, &self.diffuse.stored_filt, k, k + 1)
+    }
+
+    /// With a diffuse initial state: the number of leading steps `k` after which
+    /// part of the filtered state is still undetermined by `y_1..y_{k+1}` (its
+    /// variance is infinite; [`filtered_undetermined`](Self::filtered_undetermined)
+    /// says which states). 0 without a diffuse part.
+    pub fn diffuse_steps(&self) -> usize {
+        (0..self.t_len)
+            .take_while(|&k| {
+                self.partial_delta(k + 1)
+                    .is_some_and(|d| d.undetermined.ncols() > 0)
+            })
+            .count()
+    }
+
+    /// Which states of `x_{k+1|k+1}` have an infinite variance (a component in a
+    /// diffuse direction that `y_1..y_{k+1}` do not determine). Their entries of
+    /// [`filtered_covariance`](Self::filtered_covariance) cover only the determined
+    /// part.
+    pub fn filtered_undetermined(&self, k: usize) -> Vec<bool> {
+        let Some(delta) = self.partial_delta(k + 1) else {
+            return vec![false; self.n];
+        };
+        let (n, q) = (self.n, self.diffuse.q);
+        let x =
+            DMatrix::from_column_slice(n, q, &self.diffuse.stored_filt[k * n * q..(k + 1) * n * q]);
+        let seen = &x * &delta.undetermined;
+        (0..n)
+            .map(|i| seen.row(i).amax() > 1e-8 * x.row(i).amax())
+            .collect()
+    }
+
+    /// `delta` given the first `steps` observations (None without a diffuse part).
+    fn partial_delta(&self, steps: usize) -> Option<PartialPosterior> {
+        let q = self.diffuse.q;
+        if q == 0 {
+            return None;
+        }
+        if steps == 0 {
+            return Some(PartialPosterior::new(&vec![0.0; q * q], &vec![0.0; q], q));
+        }
+        let t = steps - 1;
+        Some(PartialPosterior::new(
+            &self.diffuse.stored_info[t * q * q..(t + 1) * q * q],
+            &self.diffuse.stored_score[t * q..(t + 1) * q],
+            q,
+        ))
+    }
+
+    /// `mean + X_k E[delta | first steps]` for the stored columns `x` at index `k`.
+    fn with_delta_mean(
+        &self,
+        mut mean: DVector<f64>,
+        x: &[f64],
+        k: usize,
+        steps: usize,
+    ) -> DVector<f64> {
+        if let Some(delta) = self.partial_delta(steps) {
+            let (n, q) = (self.n, self.diffuse.q);
+            let xk = DMatrix::from_column_slice(n, q, &x[k * n * q..(k + 1) * n * q]);
+            mean += xk * delta.mean;
+        }
+        mean
+    }
+
+    /// `p + X_k Cov(delta | first steps) X_k'` (determined directions only).
+    fn with_delta_covariance(
+        &self,
+        mut p: DMatrix<f64>,
+        x: &[f64],
+        k: usize,
+        steps: usize,
+    ) -> DMatrix<f64> {
+        if let Some(delta) = self.partial_delta(steps) {
+            let (n, q) = (self.n, self.diffuse.q);
+            let xk = DMatrix::from_column_slice(n, q, &x[k * n * q..(k + 1) * n * q]);
+            p += &xk * delta.covariance * xk.transpose();
+            sysid_linalg::symmetrize(&mut p);
+        }
         p
     }
 }
@@ -303,11 +397,14 @@ impl KalmanWorkspace {
     ) -> Result<f64> {
         let (n, p) = (model.n(), model.p());
         let t_len = record.len();
-        if keep == Keep::LoglikOnly && n == 1 && p == 1 {
+        let diffuse = model.is_diffuse();
+        if keep == Keep::LoglikOnly && n == 1 && p == 1 && !diffuse {
             return crate::scalar::loglik(model, record, record_index, !self.no_reuse);
         }
         self.prepare(model, t_len, keep);
         let store = keep == Keep::SmootherInputs;
+        self.filter.diffuse.start(model.diffuse(), p, t_len, store);
+        self.filter.delta = None;
         let nn = n * n;
         let (a, b, d, h) = (model.a(), model.b(), model.d(), model.h());
         self.x_pred.copy_from_slice(model.mu().as_slice());
@@ -405,6 +502,12 @@ impl KalmanWorkspace {
                     });
                 }
                 self.eps[j] = w;
+                if diffuse {
+                    let c_row = &self.ct[oi * n..(oi + 1) * n];
+                    self.filter
+                        .diffuse
+                        .whiten(j, c_row, &pre[j * ld..j * ld + j], diag, w);
+                }
                 quad_sum += w * w;
                 logdet.push(diag);
             }
@@ -416,6 +519,11 @@ impl KalmanWorkspace {
             }
             for i in 0..n {
                 self.x_next[i] += dot(&pre[(po + i) * ld..(po + i) * ld + po], &self.eps[..po]);
+            }
+            if diffuse {
+                self.filter
+                    .diffuse
+                    .advance(t, po, a.as_slice(), pre, ld, store);
             }
             if store {
                 let f = &mut self.filter;
@@ -468,7 +576,12 @@ impl KalmanWorkspace {
                 f.pred_factor[(t + 1) * nn..(t + 2) * nn].copy_from_slice(&self.u_pred);
             }
         }
-        let loglik = -0.5 * (observed_sum as f64) * LN_2PI - logdet.ln() - 0.5 * quad_sum;
+        let mut loglik = -0.5 * (observed_sum as f64) * LN_2PI - logdet.ln() - 0.5 * quad_sum;
+        if diffuse {
+            let (delta, correction) = self.filter.diffuse.finish(record_index)?;
+            loglik += correction;
+            self.filter.delta = Some(delta);
+        }
         self.filter.loglik = loglik;
         Ok(loglik)
     }

@@ -50,6 +50,7 @@
 pub mod conventional;
 mod data;
 mod dense;
+mod diffuse;
 mod error;
 mod filter;
 mod frequency;

@@ -11,9 +11,13 @@ use sysid_linalg::{check_finite, psd_factor};
 /// ```text
 /// x_{t+1} = A x_t + B u_t + w_t
 /// y_t     = C x_t + D u_t + h + e_t
-/// [w_t; e_t] ~ N(0, [[Q, S], [S', R]]),   x_1 ~ N(mu, P1)
+/// [w_t; e_t] ~ N(0, [[Q, S], [S', R]]),   x_1 = mu + A_d delta + eta,
+/// eta ~ N(0, P1),   delta ~ N(0, kappa I), kappa -> infinity
 /// ```
-/// with `n` states, `m` inputs and `p` outputs. Covariances may be singular (e.g.
+/// with `n` states, `m` inputs and `p` outputs. The `n x q` matrix `A_d` of diffuse
+/// directions ([`ModelBuilder::diffuse`]) is empty (`q = 0`) unless set: the initial
+/// state is then the proper law `N(mu, P1)`. With `q > 0` the filters use the exact
+/// diffuse initialisation (see [`KalmanWorkspace::loglik`](crate::KalmanWorkspace::loglik)). Covariances may be singular (e.g.
 /// `Q = 0` for an output-error model): they are stored together with square-root
 /// factors computed once at construction, which is what the filters use.
 ///
@@ -41,6 +45,8 @@ pub struct LinearGaussianModel {
     h: DVector<f64>,
     mu: DVector<f64>,
     p1: DMatrix<f64>,
+    /// `A_d`, n x q: the directions of the initial state with infinite variance.
+    diffuse: DMatrix<f64>,
     /// `L` with `L'L = [[Q, S], [S', R]]`; columns `0..n` belong to `w`, `n..n+p` to `e`.
     noise_factor: DMatrix<f64>,
     /// `n x n` factor `F` with `F'F = P1` (zero rows padded for a singular `P1`).
@@ -74,6 +80,7 @@ impl LinearGaussianModel {
             h: None,
             mu: None,
             p1: None,
+            diffuse: None,
         }
     }
 
@@ -90,6 +97,7 @@ impl LinearGaussianModel {
             h: Some(self.h.clone()),
             mu: Some(self.mu.clone()),
             p1: Some(self.p1.clone()),
+            diffuse: Some(self.diffuse.clone()),
         }
     }
 
@@ -116,7 +124,8 @@ impl LinearGaussianModel {
         s: DMatrix<f64>, "Cross-covariance `S = Cov(w_t, e_t)` (n x p).";
         h: DVector<f64>, "Output offset `h` (p).";
         mu: DVector<f64>, "Initial state mean `mu` (n).";
-        p1: DMatrix<f64>, "Initial state covariance `P1` (n x n).";
+        p1: DMatrix<f64>, "Initial state covariance `P1` (n x n): of the proper part of the initial state when there are diffuse directions.";
+        diffuse: DMatrix<f64>, "Diffuse directions `A_d` (n x q, `q = 0` for a proper initial state).";
         noise_factor: DMatrix<f64>, "Factor `L` (rows x (n+p)) with `L'L = [[Q, S], [S', R]]`; columns `0..n` are `w`, `n..n+p` are `e`.";
         initial_factor: DMatrix<f64>, "Factor `F` (n x n) with `F'F = P1`.";
     }
@@ -129,6 +138,11 @@ impl LinearGaussianModel {
             .s(DMatrix::zeros(self.n(), self.p()))
             .build()
             .expect("a valid model without S is valid: Q and R are PSD on their own")
+    }
+
+    /// Whether the initial state has diffuse directions (`q > 0`).
+    pub fn is_diffuse(&self) -> bool {
+        self.diffuse.ncols() > 0
     }
 
     /// Whether the cross-covariance `S` is identically zero.
@@ -150,6 +164,7 @@ pub struct ModelBuilder {
     h: Option<DVector<f64>>,
     mu: Option<DVector<f64>>,
     p1: Option<DMatrix<f64>>,
+    diffuse: Option<DMatrix<f64>>,
 }
 
 macro_rules! setters {
@@ -169,6 +184,7 @@ impl ModelBuilder {
         h: DVector<f64>, Some, "Sets the output offset `h` (p).";
         mu: DVector<f64>, Some, "Sets the initial state mean `mu` (n).";
         p1: DMatrix<f64>, Some, "Sets the initial state covariance `P1` (n x n, PSD).";
+        diffuse: DMatrix<f64>, Some, "Sets the diffuse directions `A_d` (n x q, linearly independent columns; `q = 0` for none): the initial state is `mu + A_d delta + eta` with `delta` of infinite variance and `eta ~ N(0, P1)`. `DMatrix::identity(n, n)` with `P1 = 0` makes the whole initial state diffuse.";
         a: DMatrix<f64>, std::convert::identity, "Replaces `A`.";
         c: DMatrix<f64>, std::convert::identity, "Replaces `C`.";
         q: DMatrix<f64>, std::convert::identity, "Replaces `Q`.";
@@ -183,7 +199,8 @@ impl ModelBuilder {
     /// matrix of the wrong shape;
     /// [`KalmanError::Matrix`] for a non-finite entry, a non-symmetric covariance or one
     /// that is not positive semi-definite (checked for `Q`, `R`, the joint
-    /// `[[Q, S], [S', R]]` and `P1`).
+    /// `[[Q, S], [S', R]]` and `P1`); [`KalmanError::DiffuseRank`] for diffuse
+    /// directions that are linearly dependent.
     pub fn build(self) -> Result<LinearGaussianModel> {
         let n = self.a.nrows();
         let p = self.c.nrows();
@@ -208,6 +225,18 @@ impl ModelBuilder {
         let h = self.h.unwrap_or_else(|| DVector::zeros(p));
         let mu = self.mu.unwrap_or_else(|| DVector::zeros(n));
         let p1 = self.p1.unwrap_or_else(|| DMatrix::identity(n, n));
+        let diffuse = self.diffuse.unwrap_or_else(|| DMatrix::zeros(n, 0));
+        if diffuse.nrows() != n || diffuse.ncols() > n {
+            return Err(KalmanError::Dimension {
+                name: "diffuse".to_string(),
+                expected_rows: n,
+                expected_cols: diffuse.ncols().min(n),
+                rows: diffuse.nrows(),
+                cols: diffuse.ncols(),
+            });
+        }
+        check_finite("diffuse", &diffuse)?;
+        check_diffuse_rank(&diffuse)?;
         let h_mat = DMatrix::from_column_slice(h.len(), 1, h.as_slice());
         let mu_mat = DMatrix::from_column_slice(mu.len(), 1, mu.as_slice());
         let shapes: [(&str, &DMatrix<f64>, usize, usize); 10] = [
@@ -266,8 +295,27 @@ impl ModelBuilder {
             h,
             mu,
             p1,
+            diffuse,
             noise_factor,
             initial_factor,
         })
     }
+}
+
+/// Refuses diffuse directions that are linearly dependent (numerically: a singular
+/// value below `q n eps` times the largest), whose weights the data could never tell
+/// apart.
+fn check_diffuse_rank(diffuse: &DMatrix<f64>) -> Result<()> {
+    let q = diffuse.ncols();
+    if q == 0 {
+        return Ok(());
+    }
+    let sv = diffuse.clone().singular_values();
+    let largest = sv.max();
+    let tol = (q * diffuse.nrows()) as f64 * f64::EPSILON * largest;
+    let rank = sv.iter().filter(|&&v| v > tol).count();
+    if rank < q {
+        return Err(KalmanError::DiffuseRank { columns: q, rank });
+    }
+    Ok(())
 }

@@ -1,5 +1,6 @@
 //! The Rauch-Tung-Striebel smoother with lag-one covariances, and the EM statistics.
 
+use crate::diffuse::DiffuseSmoothing;
 use crate::filter::Keep;
 use crate::{KalmanWorkspace, LinearGaussianModel, Record, Result, SufficientStatistics, dense};
 use nalgebra::{DMatrix, DVector, DVectorView};
@@ -185,6 +186,12 @@ impl KalmanWorkspace {
         let mut sums = stats
             .as_ref()
             .map(|st| MomentSums::new(st.dim(), t_len, n, &mut self.sums_buf));
+        let mut diffuse = f
+            .delta
+            .as_ref()
+            .map(|delta| DiffuseSmoothing::new(delta, &f.diffuse, t_len, keep_moments));
+        // a step's moments corrected for the diffuse part (statistics only)
+        let mut corrected = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut diff = vec![0.0; n];
         for t in (0..t_len).rev() {
             let jt = &f.gain_t[t * nn..(t + 1) * nn];
@@ -223,22 +230,50 @@ impl KalmanWorkspace {
             }
             let (p_t, p_next) = two_slots(&mut s.cov, cur, next, nn);
             let lag = &s.lag_one[lag_slot(t) * nn..(lag_slot(t) + 1) * nn];
+            if let Some(dx) = diffuse.as_mut() {
+                dx.step(t, jt);
+            }
             if let Some(sums) = sums.as_mut() {
-                sums.add_step(
-                    model,
-                    record,
-                    t,
-                    &s.mean[t * n..(t + 2) * n],
-                    p_t,
-                    p_next,
-                    lag,
-                );
+                let x = &s.mean[t * n..(t + 2) * n];
+                match diffuse.as_ref() {
+                    None => sums.add_step(model, record, t, x, p_t, p_next, lag),
+                    Some(dx) => {
+                        let (x_c, p_t_c, p_next_c, lag_c) = &mut corrected;
+                        for (buf, from) in [
+                            (&mut *x_c, x),
+                            (p_t_c, &*p_t),
+                            (p_next_c, &*p_next),
+                            (lag_c, lag),
+                        ] {
+                            buf.clear();
+                            buf.extend_from_slice(from);
+                        }
+                        dx.correct_mean(&mut x_c[..n], 0);
+                        dx.correct_mean(&mut x_c[n..], 1);
+                        dx.correct_covariance(p_t_c, 0, 0);
+                        dx.correct_covariance(p_next_c, 1, 1);
+                        dx.correct_covariance(lag_c, 1, 0);
+                        sums.add_step(model, record, t, x_c, p_t_c, p_next_c, lag_c);
+                    }
+                }
+            }
+            if t > 0
+                && let Some(dx) = diffuse.as_mut()
+            {
+                dx.shift();
             }
         }
         if let (Some(stats), Some(sums)) = (stats, sums) {
-            let p1 = &s.cov[cov_slot(0) * nn..(cov_slot(0) + 1) * nn];
-            stats.observe_initial(&s.mean[..n], p1);
+            let mut x1 = s.mean[..n].to_vec();
+            let mut p1 = s.cov[cov_slot(0) * nn..(cov_slot(0) + 1) * nn].to_vec();
+            if let Some(dx) = diffuse.as_ref() {
+                dx.correct_mean(&mut x1, 0);
+                dx.correct_covariance(&mut p1, 0, 0);
+            }
+            stats.observe_initial(&x1, &p1);
             sums.finish(stats);
+        } else if let Some(dx) = diffuse.as_ref() {
+            dx.correct_stored(&mut s.mean, &mut s.cov, &mut s.lag_one);
         }
         Ok(loglik)
     }

@@ -142,8 +142,25 @@ impl DenseReference {
         let loglik = -0.5 * (k as f64) * (2.0 * std::f64::consts::PI).ln()
             - 0.5 * logdet
             - 0.5 * resid.dot(&alpha);
-        let cond_mean = &mean + &s_zo * alpha;
-        let cond_cov = &cov - &s_zo * chol.solve(&s_zo.transpose());
+        let mut cond_mean = &mean + &s_zo * alpha;
+        let mut cond_cov = &cov - &s_zo * chol.solve(&s_zo.transpose());
+        let mut loglik = loglik;
+        if model.is_diffuse() {
+            // x_1 = mu + A_d delta + v_0 with a flat delta: Z moves by H delta. Given
+            // delta the moments are affine in it; its posterior is N(S^-1 s, S^-1).
+            let h = g.columns(0, n) * model.diffuse();
+            let h_o = DMatrix::from_fn(k, h.ncols(), |a, c| h[(obs[a], c)]);
+            let sinv_h = chol.solve(&h_o);
+            let info = h_o.transpose() * &sinv_h;
+            let score = sinv_h.transpose() * &resid;
+            let info_chol = info.clone().cholesky().expect("diffuse part identified");
+            let delta = info_chol.solve(&score);
+            let logdet_info = 2.0 * info_chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
+            loglik += -0.5 * logdet_info + 0.5 * score.dot(&delta);
+            let gain = &h - &s_zo * &sinv_h;
+            cond_mean += &gain * delta;
+            cond_cov += &gain * info_chol.inverse() * gain.transpose();
+        }
         DenseReference {
             n,
             p,

@@ -154,6 +154,7 @@ impl CliError {
                     | KalmanError::LengthMismatch { .. }
                     | KalmanError::Matrix(_)
                     | KalmanError::InitialCovarianceTooLarge { .. }
+                    | KalmanError::DiffuseNotIdentified { .. }
             ),
             CliError::Plot(e) => !matches!(
                 e,
@@ -161,7 +162,10 @@ impl CliError {
             ),
             CliError::Subspace(e) => !matches!(e, SubspaceError::Numerical(_)),
             CliError::Em(e) => match e {
-                LinearEmError::Kalman(KalmanError::InitialCovarianceTooLarge { .. }) => true,
+                LinearEmError::Kalman(
+                    KalmanError::InitialCovarianceTooLarge { .. }
+                    | KalmanError::DiffuseNotIdentified { .. },
+                ) => true,
                 LinearEmError::Kalman(_) | LinearEmError::Linalg(_) => false,
                 _ => true,
             },

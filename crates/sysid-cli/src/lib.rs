@@ -67,6 +67,11 @@ pub(crate) struct StatesArgs {
     model: PathBuf,
     #[command(flatten)]
     data: DataArgs,
+    /// The initial state of the record: `model` (the model file's), `stationary` (the
+    /// stationary law of a stable model's state noise) or `diffuse` (exact diffuse: the
+    /// data determine x_1; Durbin and Koopman's diffuse log-likelihood).
+    #[arg(long, default_value = "model")]
+    initial: String,
     /// Output CSV file (t, x1.., x1_sd..).
     #[arg(long)]
     out: PathBuf,
@@ -105,7 +110,7 @@ enum Command {
     Fit(commands::fit::Options),
     /// Print the exact log-likelihood of data under a model (square-root Kalman filter).
     #[command(
-        after_help = "Examples:\n  sysid loglik --model true.json --data d.csv\n  sysid loglik --model fit.json --data d.csv --json"
+        after_help = "Examples:\n  sysid loglik --model true.json --data d.csv\n  sysid loglik --model fit.json --data d.csv --json\n  sysid loglik --model fit.json --data other.csv --initial diffuse"
     )]
     Loglik {
         /// Model file (JSON, see docs/model-format.md).
@@ -113,13 +118,18 @@ enum Command {
         model: PathBuf,
         #[command(flatten)]
         data: DataArgs,
+        /// The initial state of the record: `model` (the model file's), `stationary` (the
+        /// stationary law of a stable model's state noise) or `diffuse` (exact diffuse: the
+        /// data determine x_1; Durbin and Koopman's diffuse log-likelihood).
+        #[arg(long, default_value = "model")]
+        initial: String,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
     },
     /// Kalman filter: write the filtered state means and standard deviations as CSV.
     #[command(
-        after_help = "Examples:\n  sysid filter --model fit.json --data d.csv --out filtered.csv"
+        after_help = "Examples:\n  sysid filter --model fit.json --data d.csv --out filtered.csv\n  sysid filter --model trend.json --data d.csv --initial diffuse --out filtered.csv"
     )]
     Filter(StatesArgs),
     /// RTS smoother: write the smoothed state means and standard deviations as CSV.
@@ -225,7 +235,12 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Pmmh(options)) => commands::pmcmc::run_pmmh(&options),
         Some(Command::Pgas(options)) => commands::pmcmc::run_pgas(&options),
         Some(Command::Plot(options)) => commands::plot::run(&options),
-        Some(Command::Loglik { model, data, json }) => commands::loglik::run(&model, &data, json),
+        Some(Command::Loglik {
+            model,
+            data,
+            initial,
+            json,
+        }) => commands::loglik::run(&model, &data, &initial, json),
         Some(Command::Filter(a)) => commands::smooth::run(&a, commands::smooth::Pass::Filter),
         Some(Command::Smooth(a)) => commands::smooth::run(&a, commands::smooth::Pass::Smooth),
         Some(Command::Bench { runner }) => {

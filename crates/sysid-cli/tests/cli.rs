@@ -196,6 +196,35 @@ fn model_errors_name_the_matrix() {
             r#"{"a": [[0.9]], "c": [[1.0]], "q": [[1.0]], "r": [[0.5]], "zeta": 1}"#,
             vec!["bad.json", "zeta"],
         ),
+        (
+            r#"{"a": [[0.9]], "c": [[1.0]], "q": [[1.0]], "r": [[0.5]], "initial": "stationary", "p1": [[1.0]]}"#,
+            vec!["bad.json", "\"p1\" conflicts with \"initial\""],
+        ),
+        (
+            r#"{"a": [[1.01]], "c": [[1.0]], "q": [[1.0]], "r": [[0.5]], "initial": "stationary"}"#,
+            vec![
+                "bad.json",
+                "cannot be stationary",
+                "spectral radius 1.01",
+                "diffuse",
+            ],
+        ),
+        (
+            r#"{"a": [[0.9]], "c": [[1.0]], "q": [[1.0]], "r": [[0.5]], "initial": "vague"}"#,
+            vec!["bad.json", "unknown variant `vague`", "stationary"],
+        ),
+        (
+            r#"{"a": [[0.9, 0], [0, 0.5]], "c": [[1.0, 1.0]], "q": [[1, 0], [0, 1]], "r": [[0.5]], "diffuse": [[1, 2], [1, 2]]}"#,
+            vec!["bad.json", "diffuse directions", "linearly dependent"],
+        ),
+        (
+            r#"{"a": [[0.9, 0], [0, 0.5]], "c": [[1.0, 0.0]], "q": [[1, 0], [0, 1]], "r": [[0.5]], "p1": [[0, 0], [0, 0]], "diffuse": [[0], [1]]}"#,
+            vec![
+                "d.csv",
+                "do not determine the diffuse initial state",
+                "rank 0 of 1",
+            ],
+        ),
     ] {
         std::fs::write(&model, json).unwrap();
         let out = sysid(&["loglik", "--model", s(&model), "--data", s(&data)]);

@@ -113,6 +113,25 @@ pub enum KalmanError {
         /// How many the data determine.
         rank: usize,
     },
+    /// A stationary initial state asked of a model whose `A` is not stable.
+    #[error(
+        "the initial state cannot be stationary: A is not stable (spectral radius {radius:.6}); \
+         use the diffuse initial state"
+    )]
+    NotStationary {
+        /// The spectral radius of `A`.
+        radius: f64,
+    },
+    /// A model file that gives `mu`, `p1` or `diffuse` beside an `initial` law that
+    /// defines them.
+    #[error(
+        "\"{key}\" conflicts with \"initial\": a stationary or diffuse initial state defines \
+         mu, P1 and the diffuse directions; remove one of the two"
+    )]
+    InitialConflict {
+        /// The key given beside `initial`.
+        key: &'static str,
+    },
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]
     EmptyRecord {

@@ -1,6 +1,6 @@
 //! A serialisable description of a [`LinearGaussianModel`] (the JSON model file).
 
-use crate::{KalmanError, LinearGaussianModel, Result};
+use crate::{InitialState, KalmanError, LinearGaussianModel, Result};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -36,6 +36,17 @@ pub struct ModelSpec {
     /// `P1`, n x n.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub p1: Option<Vec<Vec<f64>>>,
+    /// `A_d`, n x q: diffuse directions of the initial state.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diffuse: Option<Vec<Vec<f64>>>,
+    /// How a record's initial state is modelled: `given` (by `mu`, `p1`, `diffuse`;
+    /// the default), `stationary` or `diffuse` (then those keys must be absent).
+    #[serde(default, skip_serializing_if = "is_given")]
+    pub initial: InitialState,
+}
+
+fn is_given(initial: &InitialState) -> bool {
+    *initial == InitialState::Given
 }
 
 fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -79,11 +90,41 @@ impl ModelSpec {
                 .then(|| model.h().iter().copied().collect()),
             mu: Some(model.mu().iter().copied().collect()),
             p1: Some(rows_of(model.p1())),
+            diffuse: model.is_diffuse().then(|| rows_of(model.diffuse())),
+            initial: InitialState::Given,
         }
     }
 
+    /// The spec of a model's system, with its initial state described by `initial`
+    /// instead of the matrices `mu`, `P1`, `A_d` (kept for [`InitialState::Given`]).
+    pub fn with_initial(model: &LinearGaussianModel, initial: InitialState) -> Self {
+        let mut spec = Self::from_model(model);
+        if initial != InitialState::Given {
+            spec.mu = None;
+            spec.p1 = None;
+            spec.diffuse = None;
+            spec.initial = initial;
+        }
+        spec
+    }
+
     /// Validates the spec and builds the model (see [`crate::ModelBuilder::build`]).
+    ///
+    /// # Errors
+    /// Those of the builder; [`KalmanError::InitialConflict`] for `mu`, `p1` or
+    /// `diffuse` beside an `initial` other than `given`;
+    /// [`KalmanError::NotStationary`] for a stationary initial state of an unstable `A`.
     pub fn build(&self) -> Result<LinearGaussianModel> {
+        if self.initial != InitialState::Given {
+            let given = [
+                ("mu", self.mu.is_some()),
+                ("p1", self.p1.is_some()),
+                ("diffuse", self.diffuse.is_some()),
+            ];
+            if let Some((key, _)) = given.iter().find(|(_, present)| *present) {
+                return Err(KalmanError::InitialConflict { key });
+            }
+        }
         let mut builder = LinearGaussianModel::builder(
             matrix("A", &self.a)?,
             matrix("C", &self.c)?,
@@ -108,6 +149,9 @@ impl ModelSpec {
         if let Some(p1) = &self.p1 {
             builder = builder.p1(matrix("P1", p1)?);
         }
-        builder.build()
+        if let Some(diffuse) = &self.diffuse {
+            builder = builder.diffuse(matrix("diffuse", diffuse)?);
+        }
+        self.initial.apply(&builder.build()?)
     }
 }

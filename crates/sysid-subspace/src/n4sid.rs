@@ -558,15 +558,7 @@ struct Estimate {
 
 /// The largest eigenvalue modulus of `a` (0 for an empty matrix); a model is stable
 /// when it is below 1.
-pub fn spectral_radius(a: &DMatrix<f64>) -> f64 {
-    if a.nrows() == 0 {
-        return 0.0;
-    }
-    a.complex_eigenvalues()
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, f64::max)
-}
+pub use sysid_kalman::spectral_radius;
 
 /// Steps 2-4 of [`n4sid`] at order `n`.
 fn estimate_order(

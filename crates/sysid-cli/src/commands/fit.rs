@@ -18,7 +18,7 @@ const POLISH_AUTO_MAX: usize = 20;
 /// (by its own estimate).
 const POLISH_SWITCH_NATS: f64 = 0.1;
 use sysid::em::{EmOptions, Termination};
-use sysid::kalman::{LinearGaussianModel, ModelSpec};
+use sysid::kalman::{InitialState, LinearGaussianModel, ModelSpec, stationary_covariance};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
 /// Options of `sysid fit`.
@@ -87,6 +87,14 @@ pub struct Options {
     /// on another record of the same process.
     #[arg(long)]
     pub estimate_initial: bool,
+    /// Linear EM: the training record's initial state: `model` (the start's: N4SID's,
+    /// or the `--init` file's), `stationary` (the stationary law of the start's state
+    /// noise) or `diffuse` (exact diffuse: EM maximises Durbin and Koopman's diffuse
+    /// likelihood, as statsmodels does for unit-root models). Whatever the choice, the
+    /// model written describes a new record's initial state as `stationary` when its A
+    /// is stable and `diffuse` otherwise (unless mu or P1 were estimated or fixed).
+    #[arg(long, default_value = "model")]
+    pub initial: String,
     /// Linear EM: `squarem` (the default) accelerates EM by squared extrapolation
     /// (Varadhan and Roland 2008; monotone like EM, three E-steps per cycle, often tens
     /// of times fewer E-steps to the optimum); `none` runs plain EM.
@@ -259,7 +267,20 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         output_noise_floor: output_noise_floor(&file, o.min_output_noise)?,
         ..LinearEmSpec::default()
     };
-    let start = initial_model(o, &file)?;
+    let start = super::parse_initial(&o.initial)?
+        .apply(&initial_model(o, &file)?)
+        .map_err(|source| CliError::BadOption {
+            option: "--initial",
+            message: source.to_string(),
+        })?;
+    if o.estimate_initial && start.is_diffuse() {
+        return Err(CliError::BadOption {
+            option: "--estimate-initial",
+            message: "the initial state is diffuse (no mu or P1 to estimate); drop one of \
+                      --estimate-initial and the diffuse initial state"
+                .into(),
+        });
+    }
     let mut diagonal = o.diag.clone();
     if file.record.y.nrows() > 1
         && !o.full_r
@@ -395,11 +416,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     }
     let user_initial = o.estimate_initial || fixes.iter().any(|f| f.name == "P1" || f.name == "mu");
     let written = if user_initial {
-        result.estimate.clone()
+        InitialState::Given
+    } else if radius < 1.0 {
+        InitialState::Stationary
     } else {
-        with_stationary_initial_state(&result.estimate)
+        InitialState::Diffuse
     };
-    let text = serde_json::to_string_pretty(&ModelSpec::from_model(&written)).expect("serialises");
+    let text = serde_json::to_string_pretty(&ModelSpec::with_initial(&result.estimate, written))
+        .expect("serialises");
     write_output(&o.out, o.force, &(text + "\n"))?;
     if let Some(path) = &o.trace {
         let mut text = String::from("iteration,loglik\n");
@@ -557,7 +581,7 @@ fn singular_parts(
     });
     let state_scale = largest(model.q())
         .max(largest(model.p1()))
-        .max(largest(&with_stationary_initial_state(model).p1().clone()));
+        .max(stationary_covariance(model.a(), model.q()).map_or(0.0, |p| largest(&p)));
     let mut out = Vec::new();
     let r_low = smallest(&whitened);
     if r_low < SINGULAR {
@@ -636,34 +660,6 @@ fn output_noise_floor(
         floor[i] = rel * var;
     }
     Ok(Some(floor))
-}
-
-/// The model with `mu = 0` and `P1` the stationary covariance `P = A P A' + Q` of its
-/// state noise, when `A` is stable (else unchanged): the initial state of a new record
-/// of the same process, rather than the one EM was started with.
-fn with_stationary_initial_state(model: &LinearGaussianModel) -> LinearGaussianModel {
-    let a = model.a();
-    if model.n() == 0 || sysid::subspace::spectral_radius(a) >= 1.0 {
-        return model.clone();
-    }
-    // Smith's doubling: P = sum_k A^k Q A'^k, two terms' worth more each round
-    let (mut p, mut power) = (model.q().clone(), a.clone());
-    for _ in 0..64 {
-        let next = &p + &power * &p * power.transpose();
-        let change = (&next - &p).amax();
-        p = next;
-        power = &power * &power;
-        if change <= f64::EPSILON * p.amax() {
-            break;
-        }
-    }
-    sysid::linalg::symmetrize(&mut p);
-    model
-        .to_builder()
-        .mu(DVector::zeros(model.n()))
-        .p1(p)
-        .build()
-        .unwrap_or_else(|_| model.clone())
 }
 
 /// Why exact EM may have lowered the likelihood (or failed) at `model`: a noise

@@ -4,8 +4,8 @@ use crate::error::CliError;
 use std::path::Path;
 use sysid::kalman::KalmanWorkspace;
 
-pub fn run(model_path: &Path, data: &DataArgs, json: bool) -> Result<(), CliError> {
-    let (model, file) = model_and_data(model_path, data)?;
+pub fn run(model_path: &Path, data: &DataArgs, initial: &str, json: bool) -> Result<(), CliError> {
+    let (model, file) = model_and_data(model_path, data, initial)?;
     let loglik = KalmanWorkspace::new()
         .loglik(&model, &file.record)
         .map_err(in_data(&data.data))?;
@@ -15,6 +15,7 @@ pub fn run(model_path: &Path, data: &DataArgs, json: bool) -> Result<(), CliErro
             "command": "loglik", "loglik": loglik, "steps": file.record.len(),
             "observed_values": observed, "missing_values": file.record.y.len() - observed,
             "outputs": file.output_names, "inputs": file.input_names,
+            "diffuse_directions": model.diffuse().ncols(),
         });
         crate::say(&out.to_string());
     } else {

@@ -58,11 +58,34 @@ pub fn check_column_counts(file: &DataFile, inputs: usize, outputs: usize) -> Re
 pub fn model_and_data(
     model: &Path,
     data: &DataArgs,
+    initial: &str,
 ) -> Result<(LinearGaussianModel, DataFile), CliError> {
-    let model = read_model(model)?;
+    let path = model;
+    let model = read_model(path)?;
+    let model = parse_initial(initial)?
+        .apply(&model)
+        .map_err(|source| CliError::Model {
+            path: path.to_path_buf(),
+            source,
+        })?;
     let file = data.read()?;
     check_columns(&model, &file)?;
     Ok((model, file))
+}
+
+/// The `--initial` option: `model` (the model file's initial state), `stationary` or
+/// `diffuse`.
+pub fn parse_initial(text: &str) -> Result<sysid::kalman::InitialState, CliError> {
+    use sysid::kalman::InitialState;
+    match text {
+        "model" => Ok(InitialState::Given),
+        "stationary" => Ok(InitialState::Stationary),
+        "diffuse" => Ok(InitialState::Diffuse),
+        other => Err(CliError::BadOption {
+            option: "--initial",
+            message: format!("unknown initial state {other:?} (known: model, stationary, diffuse)"),
+        }),
+    }
 }
 
 /// Wraps a Kalman error with the data file it concerns.

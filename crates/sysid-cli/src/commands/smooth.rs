@@ -18,7 +18,8 @@ pub enum Pass {
 type MeanAndSd = (Vec<f64>, Vec<f64>);
 
 pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
-    let (model, file) = model_and_data(&a.model, &a.data)?;
+    let (model, file) = model_and_data(&a.model, &a.data, &a.initial)?;
+    let mut warnings = Vec::new();
     let mut ws = KalmanWorkspace::new();
     let n = model.n();
     // (means, standard deviations) per step, and the log-likelihood
@@ -27,15 +28,31 @@ pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
             let f = ws
                 .filter(&model, &file.record)
                 .map_err(in_data(&a.data.data))?;
+            // with a diffuse initial state, the first steps may not determine every
+            // state yet: its variance is infinite, written as inf
             let rows = (0..file.record.len())
                 .map(|k| {
                     let p = f.filtered_covariance(k);
+                    let undetermined = f.filtered_undetermined(k);
                     (
                         f.filtered_mean(k).iter().copied().collect(),
-                        (0..n).map(|i| p[(i, i)].max(0.0).sqrt()).collect(),
+                        (0..n)
+                            .map(|i| match undetermined[i] {
+                                true => f64::INFINITY,
+                                false => p[(i, i)].max(0.0).sqrt(),
+                            })
+                            .collect(),
                     )
                 })
                 .collect();
+            let steps = f.diffuse_steps();
+            if steps > 0 {
+                warnings.push(format!(
+                    "the diffuse initial state is not yet determined by the data in the first \
+                     {steps} step(s): some of their filtered states have an infinite standard \
+                     deviation (written as inf)"
+                ));
+            }
             (rows, f.loglik())
         }
         Pass::Smooth => {
@@ -73,10 +90,14 @@ pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
         Pass::Filter => ("filter", "filtered"),
         Pass::Smooth => ("smooth", "smoothed"),
     };
+    for w in &warnings {
+        crate::warn(w);
+    }
     crate::report(
         a.json,
         serde_json::json!({
             "command": command, "loglik": loglik, "steps": rows.len(), "states": n, "out": a.out,
+            "diffuse_directions": model.diffuse().ncols(), "warnings": warnings,
         }),
         || {
             format!(

@@ -1,0 +1,79 @@
+//! The initial state of a record: the model's own `(mu, P1, A_d)`, the stationary law
+//! of its state noise, or exactly diffuse.
+
+use crate::{KalmanError, LinearGaussianModel, Result};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// How the initial state `x_1` of a record is modelled (the `initial` key of a model
+/// file, `--initial` on the command line).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InitialState {
+    /// The model's `mu`, `P1` and diffuse directions as given.
+    #[default]
+    Given,
+    /// `mu = 0` and `P1` the stationary covariance `P = A P A' + Q` of the state noise
+    /// (needs a stable `A`): a record of a time series in steady state.
+    Stationary,
+    /// Every direction of `x_1` diffuse (`A_d = I`, `P1 = 0`): nothing is assumed of
+    /// the initial state; the data determine it (exact diffuse initialisation).
+    Diffuse,
+}
+
+impl InitialState {
+    /// `model` with this initial state.
+    ///
+    /// # Errors
+    /// [`KalmanError::NotStationary`] for [`Stationary`](Self::Stationary) with an
+    /// unstable `A`.
+    pub fn apply(self, model: &LinearGaussianModel) -> Result<LinearGaussianModel> {
+        let n = model.n();
+        let builder = model.to_builder();
+        let builder = match self {
+            InitialState::Given => return Ok(model.clone()),
+            InitialState::Stationary => builder
+                .p1(stationary_covariance(model.a(), model.q())?)
+                .diffuse(DMatrix::zeros(n, 0)),
+            InitialState::Diffuse => builder
+                .p1(DMatrix::zeros(n, n))
+                .diffuse(DMatrix::identity(n, n)),
+        };
+        builder.mu(DVector::zeros(n)).build()
+    }
+}
+
+/// The largest modulus of `a`'s eigenvalues.
+pub fn spectral_radius(a: &DMatrix<f64>) -> f64 {
+    if a.is_empty() {
+        return 0.0;
+    }
+    a.complex_eigenvalues()
+        .iter()
+        .map(|z| z.norm())
+        .fold(0.0, f64::max)
+}
+
+/// The stationary covariance `P = A P A' + Q = sum_k A^k Q A'^k` by Smith's doubling
+/// (two terms' worth more each round), symmetric by construction.
+///
+/// # Errors
+/// [`KalmanError::NotStationary`] when `A` is not stable (spectral radius >= 1).
+pub fn stationary_covariance(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let radius = spectral_radius(a);
+    if radius >= 1.0 || !radius.is_finite() {
+        return Err(KalmanError::NotStationary { radius });
+    }
+    let (mut p, mut power) = (q.clone(), a.clone());
+    for _ in 0..64 {
+        let next = &p + &power * &p * power.transpose();
+        let change = (&next - &p).amax();
+        p = next;
+        power = &power * &power;
+        if change <= f64::EPSILON * p.amax() {
+            break;
+        }
+    }
+    sysid_linalg::symmetrize(&mut p);
+    Ok(p)
+}

@@ -12,6 +12,13 @@ pub enum CliError {
     },
     #[error("{path}: refusing to overwrite an existing file (use --force)")]
     WouldOverwrite { path: PathBuf },
+    /// EM could not evaluate its start (e.g. a start with a singular `R` on
+    /// noise-free data); nothing was written.
+    #[error("fit: {message}")]
+    FitFailedAtStart {
+        /// What failed, why, and the option that avoids it.
+        message: String,
+    },
     #[error("{0}")]
     Plot(sysid_plot::PlotError),
     #[error("{path}: the file is empty (expected a header line)")]
@@ -144,6 +151,7 @@ impl CliError {
         let bad_input = match self {
             CliError::Io { .. } | CliError::LikelihoodDecreased(_) => false,
             CliError::FitFailedMidRun { input, .. } => *input,
+            CliError::FitFailedAtStart { .. } => true,
             // the data or the model is at fault, not the computation
             CliError::Kalman { source, .. } => matches!(
                 source,

@@ -537,3 +537,104 @@ fn ar1_plus_noise_reaches_the_direct_optimum() {
         entry("r")
     );
 }
+
+/// Noise-free data (y = x + 0.5 u, x' = 0.8 x + u, u from a fixed LCG): at order 3
+/// N4SID's start has R and Q of ~1e-30 of the data's scale, the first EM step drives
+/// them to exact zeros, and the next E-step finds an exactly predictable output. The
+/// fit fails mid-run: it says so, with the cause and the options that avoid it, exits
+/// 2 (the data's cause), and keeps the last good model and the trace so far. A start
+/// that cannot be evaluated at all (R = 0 and a known state) writes nothing.
+#[test]
+fn a_mid_run_failure_keeps_the_last_good_model_and_the_trace() {
+    let dir = scratch_dir();
+    let csv = dir.join("noise_free.csv");
+    let (mut state, mut x) = (12345_u64, 0.0_f64);
+    let mut text = String::from("t,u1,y1\n");
+    for t in 1..=200 {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let u = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+        text += &format!("{t},{u},{}\n", x + 0.5 * u);
+        x = 0.8 * x + u;
+    }
+    std::fs::write(&csv, text).unwrap();
+    let (fitted, trace) = (dir.join("fit.json"), dir.join("trace.csv"));
+    let args = |order: &'static str| {
+        vec![
+            "fit",
+            "lti",
+            "--data",
+            s(&csv),
+            "--order",
+            order,
+            "--out",
+            s(&fitted),
+            "--trace",
+            s(&trace),
+        ]
+    };
+    let out = sysid(&args("3"));
+    assert_one_line_error(
+        &out,
+        &[
+            "EM failed at iteration",
+            "innovation covariance is singular",
+            "the last good model",
+            "was written to",
+            "and the trace to",
+            "--min-output-noise",
+        ],
+    );
+    let rows = std::fs::read_to_string(&trace).unwrap().lines().count();
+    assert!(rows >= 2, "the trace has {rows} lines");
+    // the model kept is a valid model of the data
+    assert_ok(&sysid(&[
+        "loglik",
+        "--model",
+        s(&fitted),
+        "--data",
+        s(&csv),
+    ]));
+    // the named options avoid the failure
+    let mut bounded = args("3");
+    bounded.extend_from_slice(&[
+        "--min-output-noise",
+        "1e-6",
+        "--min-variance",
+        "1e-6",
+        "--force",
+    ]);
+    assert_ok(&sysid(&bounded));
+    // a start with R = 0 and a known initial state: nothing to keep
+    let start = dir.join("exact_start.json");
+    std::fs::write(
+        &start,
+        r#"{"a":[[0.8]],"b":[[1.0]],"c":[[1.0]],"d":[[0.5]],"q":[[0.0]],"r":[[0.0]],"mu":[0.0],"p1":[[0.0]]}"#,
+    )
+    .unwrap();
+    let (fitted2, trace2) = (dir.join("fit2.json"), dir.join("trace2.csv"));
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&csv),
+        "--init",
+        s(&start),
+        "--fix",
+        "Q",
+        "--out",
+        s(&fitted2),
+        "--trace",
+        s(&trace2),
+    ]);
+    assert_one_line_error(
+        &out,
+        &[
+            "the start model fails on the data",
+            "R's smallest variance",
+            "nothing was written",
+        ],
+    );
+    assert!(!fitted2.exists() && !trace2.exists());
+}

@@ -314,10 +314,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let output_error =
         spec.q == sysid::em::linear::Covariance::Fixed && start.q().iter().all(|&v| v == 0.0);
     let polish_on = polish_on || output_error;
+    let start_model = start.clone();
     let (result, e_steps) = match o.accelerate.as_str() {
         _ if output_error => {
             let loglik = sysid::kalman::loglik_dataset(&start, records)
-                .map_err(|e| CliError::Em(e.into()))?;
+                .map_err(|e| start_failure(e.into(), &start, &file, &spec))?;
             let run = sysid::em::EmResult {
                 estimate: start,
                 loglik: Some(loglik),
@@ -371,11 +372,18 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         Termination::Error { error, iteration } if *iteration > 1 && result.loglik.is_some() => {
             Some((error.clone(), *iteration))
         }
-        Termination::Error { error, .. } => return Err(CliError::Em(error.clone())),
+        Termination::Error { error, .. } => {
+            return Err(start_failure(error.clone(), &start_model, &file, &spec));
+        }
         _ => None,
     };
+    // a polish that ran and stopped short of its own criterion (not at a boundary,
+    // which is reported apart) leaves an unconverged estimate, whatever EM did
+    let polish_short = polish.as_ref().filter(|p| !p.converged && !p.boundary);
     let stop = if polish.as_ref().is_some_and(|p| p.converged) {
         "converged"
+    } else if polish_short.is_some() {
+        "not_converged"
     } else {
         em_stop(&result.termination)
     };
@@ -395,6 +403,16 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             } else {
                 ", or let --polish on finish it"
             }
+        ));
+    }
+    if let Some(p) = polish_short {
+        warnings.push(format!(
+            "the quasi-Newton polish stopped before converging ({}, after gaining {:.3e} \
+             nats): the estimate is not the maximum; fit again from it (--init {}), or bound \
+             the variances (--min-output-noise, --min-variance) if one is heading to zero",
+            p.status,
+            p.loglik - p.loglik_before,
+            o.out.display()
         ));
     }
     if let Some(p) = polish.as_ref().filter(|p| p.boundary) {
@@ -434,6 +452,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     }
     if let Some((error, iteration)) = failure {
         let input = CliError::Em(error.clone()).exit_code() == 2;
+        // a cause the diagnosis names (a collapsing variance, collinear inputs) is the
+        // data's, with an option that avoids it
+        let input = input || !estimated_singular_parts(&result.estimate, &file, &spec).is_empty();
         return Err(CliError::FitFailedMidRun {
             message: format!(
                 "EM failed at iteration {iteration}: {error}; the last good model (iteration {}, \
@@ -445,7 +466,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                     .as_ref()
                     .map(|t| format!(" and the trace to {}", t.display()))
                     .unwrap_or_default(),
-                decrease_diagnosis(&result.estimate, &file)
+                decrease_diagnosis(&result.estimate, &file, &spec)
             ),
             input,
         });
@@ -497,7 +518,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         return Err(CliError::LikelihoodDecreased(format!(
             "EM decreased the log-likelihood at iteration {iteration} ({previous} -> {current}); \
              the better model was written; {}",
-            decrease_diagnosis(&result.estimate, &file)
+            decrease_diagnosis(&result.estimate, &file, &spec)
         )));
     }
     Ok(())
@@ -608,6 +629,23 @@ fn singular_parts(
     out
 }
 
+/// [`singular_parts`] that EM estimates (a held part is the user's choice).
+fn estimated_singular_parts(
+    model: &LinearGaussianModel,
+    file: &crate::files::DataFile,
+    spec: &LinearEmSpec,
+) -> Vec<(&'static str, String)> {
+    use sysid::em::linear::Covariance;
+    singular_parts(model, file)
+        .into_iter()
+        .filter(|(name, _)| match *name {
+            "R" => spec.r != Covariance::Fixed,
+            "Q" => spec.q != Covariance::Fixed,
+            _ => spec.p1,
+        })
+        .collect()
+}
+
 /// A variance below this fraction of its scale is numerically zero for EM's
 /// statistics.
 const SINGULAR: f64 = 1e-10;
@@ -666,21 +704,53 @@ fn output_noise_floor(
 /// covariance or `P1` that is numerically singular (the statistics no longer resolve
 /// its small direction), collinear inputs, or, if none of these, a request for a bug
 /// report.
+/// The error when EM cannot evaluate its start: why, if a cause is visible (a singular
+/// `R` or `Q` of the start, e.g. N4SID's on noise-free data), with the options that
+/// avoid it; else the error itself.
+fn start_failure(
+    error: sysid::em::linear::LinearEmError,
+    start: &LinearGaussianModel,
+    file: &crate::files::DataFile,
+    spec: &LinearEmSpec,
+) -> CliError {
+    let causes = estimated_singular_parts(start, file, spec);
+    if causes.is_empty() {
+        return CliError::Em(error);
+    }
+    let causes: Vec<String> = causes
+        .into_iter()
+        .map(|(name, what)| format!("{what} (bound it: {})", bound_option(name)))
+        .collect();
+    CliError::FitFailedAtStart {
+        message: format!(
+            "the start model fails on the data ({error}): {} (noise-free data, or an order \
+             too high for them?); nothing was written",
+            causes.join("; ")
+        ),
+    }
+}
+
+/// The option that bounds a singular part named by [`singular_parts`].
+fn bound_option(name: &str) -> &'static str {
+    match name {
+        "R" => "--min-output-noise 1e-4, or --min-variance",
+        "Q" => "--min-variance (e.g. 1e-6 of the output variance)",
+        _ => "do not estimate P1: drop --estimate-initial",
+    }
+}
+
 fn decrease_diagnosis(
     model: &sysid::kalman::LinearGaussianModel,
     file: &crate::files::DataFile,
+    spec: &LinearEmSpec,
 ) -> String {
-    let mut causes: Vec<String> = singular_parts(model, file)
+    let mut causes: Vec<String> = estimated_singular_parts(model, file, spec)
         .into_iter()
         .map(|(name, what)| {
             format!(
                 "{what}: the likelihood is rising towards a singular {name}, where rounding \
                  dominates the M-step; bound it ({})",
-                match name {
-                    "R" => "--min-output-noise 1e-4, or --min-variance",
-                    "Q" => "--min-variance (e.g. 1e-6 of the output variance)",
-                    _ => "do not estimate P1: drop --estimate-initial",
-                }
+                bound_option(name)
             )
         })
         .collect();
@@ -697,6 +767,7 @@ mod tests {
     use super::decrease_diagnosis;
     use crate::files::DataFile;
     use nalgebra::{DMatrix, dmatrix};
+    use sysid::em::linear::LinearEmSpec;
     use sysid::kalman::{LinearGaussianModel, Record};
 
     fn file(u: DMatrix<f64>, y: DMatrix<f64>) -> DataFile {
@@ -726,10 +797,12 @@ mod tests {
 
     #[test]
     fn a_decrease_at_a_singular_r_points_to_the_variance_floor() {
-        let message = decrease_diagnosis(&model(1e-14), &outputs());
+        let message = decrease_diagnosis(&model(1e-14), &outputs(), &LinearEmSpec::default());
         assert!(message.contains("towards a singular R"), "{message}");
         assert!(message.contains("--min-output-noise"), "{message}");
-        assert!(decrease_diagnosis(&model(0.1), &outputs()).contains("bug"));
+        assert!(
+            decrease_diagnosis(&model(0.1), &outputs(), &LinearEmSpec::default()).contains("bug")
+        );
     }
 
     #[test]
@@ -743,7 +816,11 @@ mod tests {
         .build()
         .unwrap();
         let y = DMatrix::from_fn(1, 50, |_, t| (t as f64 * 0.7).sin());
-        let message = decrease_diagnosis(&m, &file(DMatrix::zeros(0, 50), y));
+        let message = decrease_diagnosis(
+            &m,
+            &file(DMatrix::zeros(0, 50), y),
+            &LinearEmSpec::default(),
+        );
         assert!(message.contains("singular R"), "{message}");
     }
 
@@ -760,7 +837,7 @@ mod tests {
         .unwrap();
         let u = DMatrix::from_fn(2, 50, |_, t| (t as f64 * 0.3).sin());
         let y = DMatrix::from_fn(1, 50, |_, t| (t as f64 * 0.7).sin());
-        let message = decrease_diagnosis(&m, &file(u, y));
+        let message = decrease_diagnosis(&m, &file(u, y), &LinearEmSpec::default());
         assert!(message.contains("collinear"), "{message}");
         assert!(message.contains("u1, u2"), "{message}");
     }

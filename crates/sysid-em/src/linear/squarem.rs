@@ -155,8 +155,14 @@ impl EmAlgorithm for SquaremLinearEm<'_> {
         &mut self,
         theta0: &LinearGaussianModel,
     ) -> Result<(LinearGaussianModel, f64), LinearEmError> {
+        // A failure after theta_0's E-step hands back the model whose E-step failed:
+        // the runner's next step fails on it at once and returns theta_0 with its
+        // log-likelihood, the last good model, instead of losing the start.
         let (theta1, l0) = self.em_step(theta0)?;
-        let (theta2, l1) = self.em_step(&theta1)?;
+        let (theta2, l1) = match self.em_step(&theta1) {
+            Ok(v) => v,
+            Err(_) => return Ok((theta1, l0)),
+        };
         let listed = [parts(theta0), parts(&theta1), parts(&theta2)];
         let theta = [&listed[0], &listed[1], &listed[2]];
         let (r2, v2) = norms(theta);
@@ -178,8 +184,9 @@ impl EmAlgorithm for SquaremLinearEm<'_> {
                     self.accepted += 1;
                     // the plain EM sequence's third value, for the stopping rule: one
                     // likelihood pass
-                    let l2 = self.em.loglik(&theta2)?;
-                    self.remaining = Some(crate::remaining_gain(l0, l1, l2));
+                    if let Ok(l2) = self.em.loglik(&theta2) {
+                        self.remaining = Some(crate::remaining_gain(l0, l1, l2));
+                    }
                     return Ok((next, l0));
                 }
                 _ => {}
@@ -189,7 +196,10 @@ impl EmAlgorithm for SquaremLinearEm<'_> {
         if alpha < -1.0 {
             self.alpha_max = (self.alpha_max / 4.0).max(1.0);
         }
-        let (next, l2) = self.em_step(&theta2)?;
+        let (next, l2) = match self.em_step(&theta2) {
+            Ok(v) => v,
+            Err(_) => return Ok((theta2, l0)),
+        };
         self.remaining = Some(crate::remaining_gain(l0, l1, l2));
         Ok((next, l0))
     }

@@ -82,9 +82,10 @@ pub struct Options {
     pub offset: bool,
     /// Linear EM: also estimate the initial state's mean mu and covariance P1 of this
     /// record. By default they are held at the start's values during EM (N4SID: mu = 0,
-    /// P1 = the second moment of its state sequence), and the model written has the
-    /// stationary P1 of the fitted A and Q (when A is stable), so that it can be run
-    /// on another record of the same process.
+    /// P1 = the second moment of its state sequence), and the model written describes a
+    /// new record's initial state instead ("initial": "stationary" for a stable fitted
+    /// A, "diffuse" otherwise), so that it can be run on another record of the same
+    /// process.
     #[arg(long)]
     pub estimate_initial: bool,
     /// Linear EM: the training record's initial state: `model` (the start's: N4SID's,

@@ -638,3 +638,48 @@ fn a_mid_run_failure_keeps_the_last_good_model_and_the_trace() {
     );
     assert!(!fitted2.exists() && !trace2.exists());
 }
+
+/// The file `sysid n4sid` writes (with its cross-covariance S) starts `fit lti` as
+/// `--init n4sid` does: without S, said in a warning, to the same estimate.
+#[test]
+fn an_n4sid_file_starts_fit_lti_like_the_internal_start() {
+    let dir = scratch_dir();
+    let csv = data("heating_system.csv");
+    let start = dir.join("n4sid.json");
+    assert_ok(&sysid(&[
+        "n4sid",
+        "--data",
+        s(&csv),
+        "--order",
+        "3",
+        "--out",
+        s(&start),
+    ]));
+    assert!(model(&start).get("s").is_some(), "the N4SID file has an S");
+    let fit = |init: &str, out: &str| {
+        let out = dir.join(out);
+        let result = summary(&sysid(&[
+            "fit",
+            "lti",
+            "--data",
+            s(&csv),
+            "--order",
+            "3",
+            "--init",
+            init,
+            "--out",
+            s(&out),
+            "--json",
+        ]));
+        (result, model(&out))
+    };
+    let (from_file, file_model) = fit(s(&start), "from_file.json");
+    let (internal, internal_model) = fit("n4sid", "internal.json");
+    let warnings = from_file["warnings"].to_string();
+    assert!(
+        warnings.contains("cross-covariance S was set to zero"),
+        "{from_file}"
+    );
+    assert_eq!(from_file["loglik"], internal["loglik"]);
+    assert_eq!(file_model["a"], internal_model["a"]);
+}

@@ -274,6 +274,21 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             option: "--initial",
             message: source.to_string(),
         })?;
+    // linear EM holds S; beside a non-zero S it cannot estimate Q or R. A start file
+    // with an S (as `sysid n4sid` writes) is started without it, as `--init n4sid` is,
+    // unless the user holds S on purpose.
+    let mut start_warnings = Vec::new();
+    let start = if start.has_cross_covariance() && !fixes.iter().any(|f| f.name == "S") {
+        start_warnings.push(
+            "the start's cross-covariance S was set to zero: linear EM holds S and cannot \
+             estimate Q or R beside a non-zero one (the N4SID start is treated the same way); \
+             --fix S keeps it, with Q and R fixed too"
+                .to_string(),
+        );
+        start.without_cross_covariance()
+    } else {
+        start
+    };
     if o.estimate_initial && start.is_diffuse() {
         return Err(CliError::BadOption {
             option: "--estimate-initial",
@@ -388,7 +403,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     } else {
         em_stop(&result.termination)
     };
-    let mut warnings = Vec::new();
+    let mut warnings = start_warnings;
     if stop == "max_iterations" {
         let last_gain = match result.trace[..] {
             [.., a, b] => b - a,

@@ -4,8 +4,8 @@
 //! `shared/data/score_fit.py`, which `Scorer` re-implements and is checked against on
 //! nfoursid's own models.
 
-use nalgebra::{DMatrix, DVector};
-use sysid::kalman::{LinearGaussianModel, ModelSpec, Record};
+use nalgebra::DMatrix;
+use sysid::kalman::{LinearGaussianModel, ModelSpec, Record, fit_percent};
 use sysid::subspace::{Focus, N4sidOptions, Order, n4sid};
 
 const RECORDS: [&str; 8] = [
@@ -54,82 +54,26 @@ fn load(name: &str) -> Split {
     }
 }
 
-fn fit_percent(y: &DMatrix<f64>, yhat: &DMatrix<f64>, from: usize) -> f64 {
-    let p = y.nrows();
-    (0..p)
-        .map(|i| {
-            let row: Vec<f64> = y.row(i).iter().skip(from).copied().collect();
-            let mean = row.iter().sum::<f64>() / row.len() as f64;
-            let (mut err, mut dev) = (0.0, 0.0);
-            for (k, &v) in row.iter().enumerate() {
-                err += (v - yhat[(i, from + k)]).powi(2);
-                dev += (v - mean).powi(2);
-            }
-            100.0 * (1.0 - (err / dev).sqrt())
-        })
-        .sum::<f64>()
-        / p as f64
+/// Mean over outputs of the library's fit figure.
+fn mean_fit(y: &DMatrix<f64>, y_hat: &DMatrix<f64>, from: usize) -> f64 {
+    let fit = fit_percent(y, y_hat, from);
+    fit.iter().sum::<f64>() / fit.len() as f64
 }
 
-/// Simulation fit with the least-squares initial state.
+/// Simulation fit with the least-squares initial state (`LinearGaussianModel::response`,
+/// what `sysid compare` runs).
 fn simulation_fit(model: &LinearGaussianModel, data: &Record) -> f64 {
-    let (n, p, t_len) = (model.n(), model.p(), data.len());
-    let (a, b, c, d, h) = (model.a(), model.b(), model.c(), model.d(), model.h());
-    let mut x = DVector::zeros(n);
-    let mut free = DMatrix::zeros(p, t_len);
-    let mut regressors = DMatrix::zeros(p * t_len, n);
-    let mut power = c.clone();
-    for t in 0..t_len {
-        let u = data.u.column(t);
-        free.set_column(t, &(c * &x + d * u + h));
-        x = a * &x + b * u;
-        regressors.rows_mut(t * p, p).copy_from(&power);
-        power = &power * a;
-    }
-    let residual = DVector::from_fn(p * t_len, |k, _| {
-        data.y[(k % p, k / p)] - free[(k % p, k / p)]
-    });
-    let x0 = regressors
-        .clone()
-        .svd(true, true)
-        .solve(&residual, 1e-14)
-        .unwrap();
-    let mut yhat = free;
-    for t in 0..t_len {
-        let correction = regressors.rows(t * p, p) * &x0;
-        let mut col = yhat.column_mut(t);
-        col += correction;
-    }
-    fit_percent(&data.y, &yhat, 0)
+    let response = model.response(data, None).unwrap();
+    mean_fit(&data.y, &response.outputs, 0)
 }
 
-/// One-step prediction fit of the steady-state Kalman predictor, 50 rows of burn-in.
+/// One-step prediction fit, 50 steps of burn-in (`LinearGaussianModel::predict`, what
+/// `sysid compare --horizon 1 --burn-in 50` runs). The Kalman filter from the model's
+/// initial state converges to score_fit.py's steady-state predictor started at zero
+/// within the burn-in (measured: to 3e-5 points on every record).
 fn prediction_fit(model: &LinearGaussianModel, data: &Record) -> f64 {
-    let (a, b, c, d, h) = (model.a(), model.b(), model.c(), model.d(), model.h());
-    let (q, r, s) = (model.q(), model.r(), model.s());
-    let mut pm = q.clone();
-    let mut gain = DMatrix::zeros(model.n(), model.p());
-    for _ in 0..100_000 {
-        let apc = a * &pm * c.transpose() + s;
-        let inn = c * &pm * c.transpose() + r;
-        gain = &apc * inn.clone().try_inverse().unwrap();
-        let next = a * &pm * a.transpose() + q - &gain * apc.transpose();
-        let change = (&next - &pm).amax();
-        pm = (&next + next.transpose()) / 2.0;
-        if change <= 1e-15 * pm.amax() {
-            break;
-        }
-    }
-    let mut x = DVector::zeros(model.n());
-    let mut yhat = DMatrix::zeros(model.p(), data.len());
-    for t in 0..data.len() {
-        let u = data.u.column(t);
-        let pred = c * &x + d * u + h;
-        let innovation = data.y.column(t) - &pred;
-        yhat.set_column(t, &pred);
-        x = a * &x + b * u + &gain * innovation;
-    }
-    fit_percent(&data.y, &yhat, 50)
+    let predictions = model.predict(data, 1).unwrap();
+    mean_fit(&data.y, &predictions.mean, 50)
 }
 
 fn references() -> serde_json::Value {
@@ -137,7 +81,10 @@ fn references() -> serde_json::Value {
     serde_json::from_str(&text).unwrap()
 }
 
-/// The scorer reproduces score_fit.py's figures for nfoursid's models.
+/// The library's simulation and prediction fits (what `sysid compare` prints)
+/// reproduce score_fit.py's figures for nfoursid's models: the simulation to 1e-9
+/// points, the prediction to 1e-3 (a filter from the model's initial state against the
+/// scorer's steady-state predictor from zero, 50 steps of burn-in).
 #[test]
 fn the_scorer_reproduces_score_fit_py_on_nfoursid_models() {
     let refs = references();
@@ -154,11 +101,11 @@ fn the_scorer_reproduces_score_fit_py_on_nfoursid_models() {
         let want_sim = refs[name]["nfoursid_simulation_fit"].as_f64().unwrap();
         let want_pred = refs[name]["nfoursid_prediction_fit"].as_f64().unwrap();
         assert!(
-            (sim - want_sim).abs() < 1e-6,
+            (sim - want_sim).abs() < 1e-9,
             "{name}: sim {sim} vs {want_sim}"
         );
         assert!(
-            (pred - want_pred).abs() < 1e-6,
+            (pred - want_pred).abs() < 1e-3,
             "{name}: pred {pred} vs {want_pred}"
         );
     }

@@ -137,6 +137,18 @@ enum Command {
         after_help = "Examples:\n  sysid smooth --model fit.json --data d.csv --out smoothed.csv\n  sysid plot smoothed.csv --out-dir figures"
     )]
     Smooth(StatesArgs),
+    /// k-step-ahead predicted outputs, their standard deviations and the prediction
+    /// errors (innovations for k = 1), as CSV.
+    #[command(
+        after_help = "Examples:\n  sysid predict --model fit.json --data val.csv --out pred.csv\n  sysid predict --model fit.json --data val.csv --horizon 5 --out pred5.csv --json"
+    )]
+    Predict(commands::predict::Options),
+    /// Fit per output of models' simulated (--horizon inf) or k-step predicted outputs
+    /// on a record (MATLAB `compare`), with a figure.
+    #[command(
+        after_help = "Examples:\n  sysid compare --model n4sid.json fit.json --data val.csv\n  sysid compare --model fit.json --data val.csv --horizon 1 --burn-in 50 --out-dir figures"
+    )]
+    Compare(commands::compare::Options),
     /// Bootstrap particle filter: the log-likelihood estimate and filtered means.
     #[command(
         after_help = "Examples:\n  sysid pf --system nlbench --data nl.csv --particles 1000 --out filtered.csv\n  sysid pf --model fit.json --data d.csv --particles 500 --resample stratified --ess 0.5 --json"
@@ -230,6 +242,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Simulate(options)) => commands::simulate::run(&options),
         Some(Command::N4sid(options)) => commands::n4sid::run(&options),
         Some(Command::Fit(options)) => commands::fit::run(&options),
+        Some(Command::Predict(options)) => commands::predict::run(&options),
+        Some(Command::Compare(options)) => commands::compare::run(&options),
         Some(Command::Pf(options)) => commands::particle::run_filter(&options),
         Some(Command::Psmooth(options)) => commands::particle::run_smoother(&options),
         Some(Command::Pmmh(options)) => commands::pmcmc::run_pmmh(&options),

@@ -683,3 +683,184 @@ fn an_n4sid_file_starts_fit_lti_like_the_internal_start() {
     assert_eq!(from_file["loglik"], internal["loglik"]);
     assert_eq!(file_model["a"], internal_model["a"]);
 }
+
+/// `predict --horizon 1` on monthly CO2 (five missing months) with a local linear
+/// trend: the predictions, innovations and their variances equal statsmodels 0.15.0's
+/// `forecasts`, `forecasts_error` and `forecasts_error_cov` (`MLEModel`, known initial
+/// state N([316, 0.1], diag(4, 0.01)), Q = diag(0.05, 1e-4), R = 0.3), to 1e-8
+/// relative (the innovations relative to the series' level, of which they are a
+/// difference); missing months have no error (statsmodels: NaN, sysid: NaN).
+#[test]
+fn one_step_predictions_match_statsmodels_on_co2() {
+    let dir = scratch_dir();
+    let model = dir.join("trend.json");
+    std::fs::write(
+        &model,
+        r#"{"a":[[1,1],[0,1]],"c":[[1,0]],"q":[[0.05,0],[0,1e-4]],"r":[[0.3]],"mu":[316,0.1],"p1":[[4,0],[0,0.01]]}"#,
+    )
+    .unwrap();
+    let out = dir.join("pred.csv");
+    let csv = data("co2m.csv");
+    let result = summary(&sysid(&[
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&csv),
+        "--out",
+        s(&out),
+        "--json",
+    ]));
+    let close = |got: f64, want: f64, what: &str| {
+        assert!(
+            (got - want).abs() <= 1e-8 * want.abs().max(1.0),
+            "{what}: {got} vs statsmodels {want}"
+        );
+    };
+    close(
+        result["loglik"].as_f64().unwrap(),
+        -2576.2289056630743,
+        "loglik",
+    );
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next().unwrap(), "t,y1_pred,y1_sd,y1_error,y1_std");
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    for (k, pred, error, variance) in [
+        (0, 316.0, 0.10000000000002274, 4.3),
+        (1, 316.193023255814, 1.0069767441859767, 0.6390697674418605),
+        (3, 317.23036956563254, f64::NAN, 0.5059637158850416),
+        (
+            4,
+            317.3624754738059,
+            -1.7374754738058868,
+            0.6015961184440285,
+        ),
+        (7, 314.7495919235324, f64::NAN, 0.5058620141355222),
+        (8, 314.6438711536459, -1.218871153645864, 0.6006485358120122),
+        (
+            100,
+            323.40337673242664,
+            -0.5533767324266137,
+            0.4695742270576536,
+        ),
+        (
+            525,
+            369.5446899658116,
+            1.4753100341883965,
+            0.46956280029923136,
+        ),
+    ] {
+        let row = &rows[k];
+        close(row[1], pred, &format!("prediction {k}"));
+        close(row[2] * row[2], variance, &format!("variance {k}"));
+        if error.is_nan() {
+            assert!(row[3].is_nan() && row[4].is_nan(), "row {k}: {row:?}");
+        } else {
+            // an innovation is a difference of two numbers of the series' level (~370
+            // ppm): its precision is relative to the level, not to itself
+            let (level, sd) = (row[1].abs(), variance.sqrt());
+            for (got, what) in [(row[3], "innovation"), (row[4] * sd, "standardised")] {
+                assert!(
+                    (got - error).abs() <= 1e-8 * level,
+                    "{what} {k}: {got} vs statsmodels {error}"
+                );
+            }
+        }
+    }
+}
+
+/// `sysid compare` prints score_fit.py's figures (tests/data/daisy/references.json) for
+/// nfoursid's model of the heating system's validation half: the simulation with the
+/// least-squares initial state to 1e-9, the one-step prediction after 50 steps of
+/// burn-in to 1e-3; several models in one call; a figure.
+#[test]
+fn compare_reproduces_the_scorer_on_the_heating_system() {
+    let dir = scratch_dir();
+    let (estimation, validation) = halves(&dir, "heating_system.csv");
+    let fixtures = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/daisy");
+    let refs: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixtures.join("references.json")).unwrap())
+            .unwrap();
+    let nfoursid = fixtures.join("heating_system.nfoursid.json");
+    let ours = dir.join("ours.json");
+    assert_ok(&sysid(&[
+        "n4sid",
+        "--data",
+        s(&estimation),
+        "--order",
+        "3",
+        "--out",
+        s(&ours),
+    ]));
+    let figures = dir.join("figures");
+    let sim = summary(&sysid(&[
+        "compare",
+        "--model",
+        s(&nfoursid),
+        s(&ours),
+        "--data",
+        s(&validation),
+        "--out-dir",
+        s(&figures),
+        "--json",
+    ]));
+    let fit = |result: &serde_json::Value, k: usize| {
+        result["models"][k]["fit_percent"][0].as_f64().unwrap()
+    };
+    let want = |key: &str| refs["heating_system"][key].as_f64().unwrap();
+    assert!(
+        (fit(&sim, 0) - want("nfoursid_simulation_fit")).abs() < 1e-9,
+        "{sim}"
+    );
+    assert!(
+        (fit(&sim, 1) - want("best_reference_simulation_fit")).abs() < 1.0,
+        "{sim}"
+    );
+    assert_eq!(sim["models"].as_array().unwrap().len(), 2);
+    assert!(figures.join("compare.svg").exists() && figures.join("compare.png").exists());
+    let svg = std::fs::read_to_string(figures.join("compare.svg")).unwrap();
+    assert!(
+        svg.contains("measured") && svg.contains("fit"),
+        "the figure's legend"
+    );
+    let pred = summary(&sysid(&[
+        "compare",
+        "--model",
+        s(&nfoursid),
+        "--data",
+        s(&validation),
+        "--horizon",
+        "1",
+        "--burn-in",
+        "50",
+        "--json",
+    ]));
+    assert!(
+        (fit(&pred, 0) - want("nfoursid_prediction_fit")).abs() < 1e-3,
+        "{pred}"
+    );
+    // the figure is not replaced without --force
+    let again = sysid(&[
+        "compare",
+        "--model",
+        s(&nfoursid),
+        "--data",
+        s(&validation),
+        "--out-dir",
+        s(&figures),
+    ]);
+    assert_one_line_error(&again, &["compare.svg", "--force"]);
+    let bad = sysid(&[
+        "compare",
+        "--model",
+        s(&nfoursid),
+        "--data",
+        s(&validation),
+        "--horizon",
+        "0",
+    ]);
+    assert_one_line_error(&bad, &["--horizon", "at least 1"]);
+}

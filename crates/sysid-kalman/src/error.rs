@@ -132,6 +132,15 @@ pub enum KalmanError {
         /// The key given beside `initial`.
         key: &'static str,
     },
+    /// A noise-free simulation that overflows (an unstable `A` over a long record).
+    #[error(
+        "the model's simulation diverges at time {time} (an unstable A?): its response cannot \
+         be compared with the data"
+    )]
+    SimulationDiverges {
+        /// Time step (1-based) at which it overflowed.
+        time: usize,
+    },
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]
     EmptyRecord {

@@ -138,6 +138,18 @@ impl FilterOutput {
             .collect()
     }
 
+    /// With a diffuse initial state: the predicted state's derivative `X` (n x q) in
+    /// the diffuse part at index `k` (`x_{k+1|k}`), and a basis (q x r) of the
+    /// directions that `y_1..y_k` do not determine yet (`r = 0` once all are). `None`
+    /// without a diffuse part.
+    pub(crate) fn predicted_undetermined(&self, k: usize) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
+        let delta = self.partial_delta(k)?;
+        let (n, q) = (self.n, self.diffuse.q);
+        let x =
+            DMatrix::from_column_slice(n, q, &self.diffuse.stored_pred[k * n * q..(k + 1) * n * q]);
+        Some((x, delta.undetermined))
+    }
+
     /// `delta` given the first `steps` observations (None without a diffuse part).
     fn partial_delta(&self, steps: usize) -> Option<PartialPosterior> {
         let q = self.diffuse.q;

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod compare;
 pub mod demo;
 pub mod fit;
 pub mod fit_affine;
@@ -10,6 +11,7 @@ pub mod n4sid;
 pub mod particle;
 pub mod plot;
 pub mod pmcmc;
+pub mod predict;
 pub mod simulate;
 pub mod smooth;
 

@@ -1,0 +1,129 @@
+//! `sysid predict`: k-step-ahead predicted outputs, their standard deviations, the
+//! prediction errors and the standardised errors.
+
+use super::{in_data, model_and_data};
+use crate::DataArgs;
+use crate::error::CliError;
+use crate::files::{create_output, fmt};
+use std::io::Write;
+use std::path::PathBuf;
+use sysid::kalman::fit_percent;
+
+/// Options of `sysid predict`.
+#[derive(clap::Args, Debug)]
+pub struct Options {
+    /// Model file (JSON, see docs/model-format.md).
+    #[arg(long)]
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Prediction horizon k: y_t is predicted from the outputs up to t - k (and every
+    /// input up to t). 1 gives the innovations.
+    #[arg(long, default_value_t = 1)]
+    pub horizon: usize,
+    /// The initial state of the record: `model` (the model file's), `stationary` or
+    /// `diffuse` (see `sysid loglik --help`).
+    #[arg(long, default_value = "model")]
+    pub initial: String,
+    /// Output CSV: t, then per output NAME: NAME_pred, NAME_sd, NAME_error, NAME_std
+    /// (the error divided by the standard deviation).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print a machine-readable summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(o: &Options) -> Result<(), CliError> {
+    if o.horizon == 0 {
+        return Err(CliError::BadOption {
+            option: "--horizon",
+            message: "must be at least 1".into(),
+        });
+    }
+    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    let (model, file) = model_and_data(&o.model, &o.data, &o.initial)?;
+    let pred = model
+        .predict(&file.record, o.horizon)
+        .map_err(in_data(&o.data.data))?;
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    let mut header = vec!["t".to_string()];
+    for name in &file.output_names {
+        for suffix in ["pred", "sd", "error", "std"] {
+            header.push(format!("{name}_{suffix}"));
+        }
+    }
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    for t in 0..file.record.len() {
+        let mut row = vec![fmt(file.time[t])];
+        for i in 0..model.p() {
+            for v in [
+                pred.mean[(i, t)],
+                pred.sd[(i, t)],
+                pred.errors[(i, t)],
+                pred.standardised[(i, t)],
+            ] {
+                row.push(fmt(v));
+            }
+        }
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.commit()?;
+    let fit = fit_percent(&file.record.y, &pred.mean, 0);
+    // the spread of the standardised errors: about 1 for a model that describes its
+    // own uncertainty
+    let spread: Vec<f64> = (0..model.p())
+        .map(|i| {
+            let seen: Vec<f64> = pred
+                .standardised
+                .row(i)
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite())
+                .collect();
+            (seen.iter().map(|v| v * v).sum::<f64>() / seen.len().max(1) as f64).sqrt()
+        })
+        .collect();
+    let undetermined = pred.sd.iter().filter(|v| v.is_infinite()).count();
+    let mut warnings = Vec::new();
+    if undetermined > 0 {
+        warnings.push(format!(
+            "{undetermined} prediction(s) depend on the diffuse initial state before the data \
+             determine it: their standard deviation is inf"
+        ));
+    }
+    for w in &warnings {
+        crate::warn(w);
+    }
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "predict", "horizon": o.horizon, "steps": file.record.len(),
+            "loglik": pred.loglik, "outputs": file.output_names, "fit_percent": fit,
+            "standardised_rms": spread, "out": o.out, "warnings": warnings,
+        }),
+        || {
+            let per_output: Vec<String> = file
+                .output_names
+                .iter()
+                .zip(&fit)
+                .zip(&spread)
+                .map(|((name, f), s)| format!("{name}: fit {f:.2} %, standardised rms {s:.3}"))
+                .collect();
+            format!(
+                "{}-step predictions ({}); wrote {}",
+                o.horizon,
+                per_output.join("; "),
+                o.out.display()
+            )
+        },
+    );
+    Ok(())
+}

@@ -1,0 +1,105 @@
+//! `k`-step-ahead predictions of a record's outputs, their uncertainty, and the
+//! prediction errors.
+
+use crate::{KalmanWorkspace, LinearGaussianModel, Record, Result};
+use nalgebra::{DMatrix, DVector};
+
+/// `k`-step-ahead predictions `y_{t|t-k} = E[y_t | y_1..y_{t-k}, u_1..u_t]` of one
+/// record (index `t = 0..T-1` is time `t + 1`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Predictions {
+    /// The horizon `k >= 1`.
+    pub horizon: usize,
+    /// Predicted outputs (p x T).
+    pub mean: DMatrix<f64>,
+    /// Their standard deviations `sqrt(diag(C P_{t|t-k} C' + R))` (p x T): the
+    /// uncertainty of the prediction of a new measurement. Infinite where the data do
+    /// not yet determine a diffuse initial state's effect on that output.
+    pub sd: DMatrix<f64>,
+    /// Prediction errors `y_t - y_{t|t-k}` (p x T; NaN where `y_t` is missing); for
+    /// `k = 1` the innovations.
+    pub errors: DMatrix<f64>,
+    /// Errors divided by their standard deviations, output by output (p x T; NaN
+    /// where `y_t` is missing, 0 where the standard deviation is infinite).
+    pub standardised: DMatrix<f64>,
+    /// Covariances `C P_{t|t-k} C' + R` of each step's prediction (p x p each).
+    pub covariances: Vec<DMatrix<f64>>,
+    /// The record's log-likelihood under the model (from the same filter pass).
+    pub loglik: f64,
+}
+
+impl LinearGaussianModel {
+    /// `horizon`-step-ahead predictions of the record's outputs from its initial state
+    /// (`mu`, `P1` and any diffuse directions), by the square-root Kalman filter: the
+    /// predicted state `x_{t-k+1|t-k}` is run `k - 1` steps forward without data
+    /// (`x <- A x + B u`, `P <- A P A' + Q`), and mapped to the outputs. The first
+    /// `k - 1` steps are predicted from the initial state alone. For `k = 1` the
+    /// errors are the innovations and the covariances the innovation covariances,
+    /// statsmodels' `forecasts_error` and `forecasts_error_cov`.
+    ///
+    /// # Errors
+    /// Those of the filter ([`KalmanWorkspace::filter`]); a `horizon` of zero is
+    /// treated as 1.
+    pub fn predict(&self, record: &Record, horizon: usize) -> Result<Predictions> {
+        let k = horizon.max(1);
+        let (n, p, t_len) = (self.n(), self.p(), record.len());
+        let mut ws = KalmanWorkspace::new();
+        let f = ws.filter(self, record)?;
+        let mut pred = Predictions {
+            horizon: k,
+            mean: DMatrix::zeros(p, t_len),
+            sd: DMatrix::zeros(p, t_len),
+            errors: DMatrix::zeros(p, t_len),
+            standardised: DMatrix::zeros(p, t_len),
+            covariances: Vec::with_capacity(t_len),
+            loglik: f.loglik(),
+        };
+        for t in 0..t_len {
+            // the last data used: steps before `base`, whose predicted state is index base
+            let base = (t + 1).saturating_sub(k);
+            let mut x: DVector<f64> = f.predicted_mean(base);
+            let mut cov = f.predicted_covariance(base);
+            let mut response = DMatrix::<f64>::identity(n, n); // d x_t / d x_base
+            for j in base..t {
+                let u = record.u.column(j);
+                x = self.a() * &x + self.b() * u;
+                cov = self.a() * &cov * self.a().transpose() + self.q();
+                response = self.a() * response;
+            }
+            sysid_linalg::symmetrize(&mut cov);
+            let u = record.u.column(t);
+            let mean = self.c() * &x + self.d() * u + self.h();
+            let mut out_cov = self.c() * cov * self.c().transpose() + self.r();
+            sysid_linalg::symmetrize(&mut out_cov);
+            // an output is undetermined if it depends on a diffuse direction the data
+            // have not pinned down yet
+            let undetermined = f.predicted_undetermined(base).map(|(xd, basis)| {
+                let effect = self.c() * response * xd;
+                let seen = &effect * basis;
+                (0..p)
+                    .map(|i| seen.ncols() > 0 && seen.row(i).amax() > 1e-8 * effect.row(i).amax())
+                    .collect::<Vec<bool>>()
+            });
+            for i in 0..p {
+                let infinite = undetermined.as_ref().is_some_and(|u| u[i]);
+                let sd = if infinite {
+                    f64::INFINITY
+                } else {
+                    out_cov[(i, i)].max(0.0).sqrt()
+                };
+                let error = record.y[(i, t)] - mean[i];
+                pred.mean[(i, t)] = mean[i];
+                pred.sd[(i, t)] = sd;
+                pred.errors[(i, t)] = error;
+                pred.standardised[(i, t)] = match (error.is_nan(), infinite) {
+                    (true, _) => f64::NAN,
+                    (false, true) => 0.0,
+                    (false, false) if sd == 0.0 && error == 0.0 => 0.0,
+                    (false, false) => error / sd,
+                };
+            }
+            pred.covariances.push(out_cov);
+        }
+        Ok(pred)
+    }
+}

@@ -149,6 +149,12 @@ enum Command {
         after_help = "Examples:\n  sysid compare --model n4sid.json fit.json --data val.csv\n  sysid compare --model fit.json --data val.csv --horizon 1 --burn-in 50 --out-dir figures"
     )]
     Compare(commands::compare::Options),
+    /// Residual tests of a model on a record: autocorrelation of the one-step errors,
+    /// cross-correlation with the inputs, Ljung-Box statistic and p-value, a figure.
+    #[command(
+        after_help = "Examples:\n  sysid resid --model fit.json --data val.csv\n  sysid resid --model fit.json --data val.csv --lags 25 --out resid.csv --out-dir figures --json"
+    )]
+    Resid(commands::resid::Options),
     /// Bootstrap particle filter: the log-likelihood estimate and filtered means.
     #[command(
         after_help = "Examples:\n  sysid pf --system nlbench --data nl.csv --particles 1000 --out filtered.csv\n  sysid pf --model fit.json --data d.csv --particles 500 --resample stratified --ess 0.5 --json"
@@ -244,6 +250,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Fit(options)) => commands::fit::run(&options),
         Some(Command::Predict(options)) => commands::predict::run(&options),
         Some(Command::Compare(options)) => commands::compare::run(&options),
+        Some(Command::Resid(options)) => commands::resid::run(&options),
         Some(Command::Pf(options)) => commands::particle::run_filter(&options),
         Some(Command::Psmooth(options)) => commands::particle::run_smoother(&options),
         Some(Command::Pmmh(options)) => commands::pmcmc::run_pmmh(&options),

@@ -864,3 +864,64 @@ fn compare_reproduces_the_scorer_on_the_heating_system() {
     ]);
     assert_one_line_error(&bad, &["--horizon", "at least 1"]);
 }
+
+/// `resid` on the Nile's local level (Q = 1469.1, R = 15099, x_1 ~ N(1000, 1e6)): the
+/// Ljung-Box statistic and p-value of the standardised one-step errors equal
+/// statsmodels 0.15.0's `acorr_ljungbox` on `filter().standardized_forecasts_error`
+/// (10 lags: 13.47612402620441, p 0.19825537569874904; 20 lags: 15.85510137488169,
+/// p 0.7255718611912612) and its `acf` (lag 1: 0.11564197251594091, lag 10:
+/// -0.19909104176920261) to 1e-8; the residuals are white, so no warning.
+#[test]
+fn resid_matches_statsmodels_ljung_box_on_the_nile() {
+    let dir = scratch_dir();
+    let model = dir.join("nile.json");
+    std::fs::write(
+        &model,
+        r#"{"a":[[1.0]],"c":[[1.0]],"q":[[1469.1]],"r":[[15099.0]],"mu":[1000.0],"p1":[[1e6]]}"#,
+    )
+    .unwrap();
+    let csv = data("nile.csv");
+    let close = |got: &serde_json::Value, want: f64, what: &str| {
+        let got = got.as_f64().unwrap();
+        assert!(
+            (got - want).abs() <= 1e-8 * want.abs(),
+            "{what}: {got} vs statsmodels {want}"
+        );
+    };
+    for (lags, statistic, p_value) in [
+        ("10", 13.47612402620441, 0.19825537569874904),
+        ("20", 15.85510137488169, 0.7255718611912612),
+    ] {
+        let out = dir.join(format!("resid{lags}.csv"));
+        let result = summary(&sysid(&[
+            "resid",
+            "--model",
+            s(&model),
+            "--data",
+            s(&csv),
+            "--lags",
+            lags,
+            "--out",
+            s(&out),
+            "--json",
+        ]));
+        let output = &result["outputs"][0];
+        close(&output["ljung_box"]["statistic"], statistic, "Q");
+        close(&output["ljung_box"]["p_value"], p_value, "p");
+        close(&output["acf"][1], 0.11564197251594091, "acf 1");
+        close(&output["acf"][10], -0.19909104176920261, "acf 10");
+        assert_eq!(result["warnings"], serde_json::json!([]), "{result}");
+        let rows = std::fs::read_to_string(&out).unwrap().lines().count();
+        assert_eq!(rows, 1 + 2 * lags.parse::<usize>().unwrap() + 1);
+    }
+    let bad = sysid(&[
+        "resid",
+        "--model",
+        s(&model),
+        "--data",
+        s(&csv),
+        "--lags",
+        "100",
+    ]);
+    assert_one_line_error(&bad, &["--lags", "100 usable residuals"]);
+}

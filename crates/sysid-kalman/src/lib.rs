@@ -57,6 +57,7 @@ mod frequency;
 mod initial;
 mod model;
 mod predict;
+pub mod residuals;
 mod response;
 mod scalar;
 mod simulate;

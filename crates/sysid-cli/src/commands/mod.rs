@@ -12,6 +12,7 @@ pub mod particle;
 pub mod plot;
 pub mod pmcmc;
 pub mod predict;
+pub mod resid;
 pub mod simulate;
 pub mod smooth;
 

@@ -149,6 +149,11 @@ enum Command {
         after_help = "Examples:\n  sysid compare --model n4sid.json fit.json --data val.csv\n  sysid compare --model fit.json --data val.csv --horizon 1 --burn-in 50 --out-dir figures"
     )]
     Compare(commands::compare::Options),
+    /// Forecast outputs beyond the data, with prediction intervals (CSV).
+    #[command(
+        after_help = "Examples:\n  sysid forecast --model fit.json --data d.csv --steps 12 --out forecast.csv\n  sysid forecast --model fit.json --data d.csv --steps 50 --future-inputs u_next.csv --level 0.9 --out forecast.csv"
+    )]
+    Forecast(commands::forecast::Options),
     /// Residual tests of a model on a record: autocorrelation of the one-step errors,
     /// cross-correlation with the inputs, Ljung-Box statistic and p-value, a figure.
     #[command(
@@ -251,6 +256,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Predict(options)) => commands::predict::run(&options),
         Some(Command::Compare(options)) => commands::compare::run(&options),
         Some(Command::Resid(options)) => commands::resid::run(&options),
+        Some(Command::Forecast(options)) => commands::forecast::run(&options),
         Some(Command::Pf(options)) => commands::particle::run_filter(&options),
         Some(Command::Psmooth(options)) => commands::particle::run_smoother(&options),
         Some(Command::Pmmh(options)) => commands::pmcmc::run_pmmh(&options),

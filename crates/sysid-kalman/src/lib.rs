@@ -70,7 +70,7 @@ pub use error::{KalmanError, Result};
 pub use filter::{FilterOutput, KalmanWorkspace};
 pub use initial::{InitialState, spectral_radius, stationary_covariance};
 pub use model::{LinearGaussianModel, ModelBuilder};
-pub use predict::Predictions;
+pub use predict::{Forecast, Predictions};
 pub use response::{Response, fit_percent};
 pub use simulate::Simulation;
 pub use smoother::SmootherOutput;

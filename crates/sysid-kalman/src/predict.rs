@@ -1,7 +1,7 @@
 //! `k`-step-ahead predictions of a record's outputs, their uncertainty, and the
 //! prediction errors.
 
-use crate::{KalmanWorkspace, LinearGaussianModel, Record, Result};
+use crate::{KalmanError, KalmanWorkspace, LinearGaussianModel, Record, Result};
 use nalgebra::{DMatrix, DVector};
 
 /// `k`-step-ahead predictions `y_{t|t-k} = E[y_t | y_1..y_{t-k}, u_1..u_t]` of one
@@ -101,5 +101,87 @@ impl LinearGaussianModel {
             pred.covariances.push(out_cov);
         }
         Ok(pred)
+    }
+}
+
+/// Outputs beyond the end of a record (see [`LinearGaussianModel::forecast`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Forecast {
+    /// `E[y_{T+j} | y_1..y_T]`, `j = 1..=steps` (p x steps).
+    pub mean: DMatrix<f64>,
+    /// Their standard deviations (p x steps).
+    pub sd: DMatrix<f64>,
+    /// Their covariances `C P_{T+j|T} C' + R` (p x p each).
+    pub covariances: Vec<DMatrix<f64>>,
+}
+
+impl LinearGaussianModel {
+    /// Forecasts `steps` outputs beyond the record, given the future inputs
+    /// (`m x steps`; `0 x steps` for a model without inputs): the filter's last
+    /// predicted state `x_{T+1|T}` run forward without data, as statsmodels'
+    /// `get_forecast`.
+    ///
+    /// # Errors
+    /// Those of the filter; [`KalmanError::Dimension`] when `future_inputs` is not
+    /// `m x steps`; [`KalmanError::SimulationDiverges`] if the forecast overflows.
+    pub fn forecast(
+        &self,
+        record: &Record,
+        future_inputs: &DMatrix<f64>,
+        steps: usize,
+    ) -> Result<Forecast> {
+        let (m, p) = (self.m(), self.p());
+        if future_inputs.nrows() != m || future_inputs.ncols() != steps {
+            return Err(KalmanError::Dimension {
+                name: "future inputs".into(),
+                expected_rows: m,
+                expected_cols: steps,
+                rows: future_inputs.nrows(),
+                cols: future_inputs.ncols(),
+            });
+        }
+        if let Some((j, _)) = future_inputs
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !v.is_finite())
+        {
+            return Err(KalmanError::NonFiniteData {
+                record: 0,
+                time: record.len() + j / m.max(1) + 1,
+                what: "input",
+                index: j % m.max(1) + 1,
+                value: future_inputs[j],
+            });
+        }
+        let mut ws = KalmanWorkspace::new();
+        let f = ws.filter(self, record)?;
+        let t_len = record.len();
+        let mut x: DVector<f64> = f.predicted_mean(t_len);
+        let mut cov = f.predicted_covariance(t_len);
+        let mut out = Forecast {
+            mean: DMatrix::zeros(p, steps),
+            sd: DMatrix::zeros(p, steps),
+            covariances: Vec::with_capacity(steps),
+        };
+        for j in 0..steps {
+            let u = future_inputs.column(j);
+            let mean = self.c() * &x + self.d() * u + self.h();
+            let mut out_cov = self.c() * &cov * self.c().transpose() + self.r();
+            sysid_linalg::symmetrize(&mut out_cov);
+            if !mean.iter().chain(out_cov.iter()).all(|v| v.is_finite()) {
+                return Err(KalmanError::SimulationDiverges {
+                    time: t_len + j + 1,
+                });
+            }
+            out.mean.set_column(j, &mean);
+            for i in 0..p {
+                out.sd[(i, j)] = out_cov[(i, i)].max(0.0).sqrt();
+            }
+            out.covariances.push(out_cov);
+            x = self.a() * &x + self.b() * u;
+            cov = self.a() * &cov * self.a().transpose() + self.q();
+            sysid_linalg::symmetrize(&mut cov);
+        }
+        Ok(out)
     }
 }

@@ -6,6 +6,7 @@ pub mod fit;
 pub mod fit_affine;
 pub mod fit_wiener;
 pub mod fix;
+pub mod forecast;
 pub mod loglik;
 pub mod n4sid;
 pub mod particle;

@@ -1,0 +1,152 @@
+//! `sysid forecast`: outputs beyond the end of a record, with prediction intervals.
+
+use super::{in_data, model_and_data};
+use crate::DataArgs;
+use crate::error::CliError;
+use crate::files::{ColumnChoice, create_output, fmt, read_data};
+use statrs::distribution::{ContinuousCDF, Normal};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Options of `sysid forecast`.
+#[derive(clap::Args, Debug)]
+pub struct Options {
+    /// Model file (JSON, see docs/model-format.md).
+    #[arg(long)]
+    pub model: PathBuf,
+    #[command(flatten)]
+    pub data: DataArgs,
+    /// Number of steps beyond the data.
+    #[arg(long)]
+    pub steps: usize,
+    /// CSV of the inputs over the forecast (the same input columns as the data, at
+    /// least --steps rows); required for a model with inputs.
+    #[arg(long)]
+    pub future_inputs: Option<PathBuf>,
+    /// Coverage of the prediction intervals.
+    #[arg(long, default_value_t = 0.95)]
+    pub level: f64,
+    /// The initial state of the record: `model`, `stationary` or `diffuse` (see
+    /// `sysid loglik --help`).
+    #[arg(long, default_value = "model")]
+    pub initial: String,
+    /// Output CSV: step (1..steps after the data), then per output NAME: NAME,
+    /// NAME_sd, NAME_lower, NAME_upper.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print a machine-readable summary.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(o: &Options) -> Result<(), CliError> {
+    if o.steps == 0 {
+        return Err(CliError::BadOption {
+            option: "--steps",
+            message: "must be at least 1".into(),
+        });
+    }
+    if !(o.level > 0.0 && o.level < 1.0) {
+        return Err(CliError::BadOption {
+            option: "--level",
+            message: format!("{} is not a probability strictly between 0 and 1", o.level),
+        });
+    }
+    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    let (model, file) = model_and_data(&o.model, &o.data, &o.initial)?;
+    let future = match (&o.future_inputs, model.m()) {
+        (_, 0) => nalgebra::DMatrix::zeros(0, o.steps),
+        (None, m) => {
+            return Err(CliError::BadOption {
+                option: "--future-inputs",
+                message: format!(
+                    "the model has {m} input(s) ({}): give their values over the {} steps",
+                    file.input_names.join(", "),
+                    o.steps
+                ),
+            });
+        }
+        (Some(path), _) => {
+            let inputs = read_data(
+                path,
+                &ColumnChoice {
+                    inputs: Some(file.input_names.clone()),
+                    outputs: Some(Vec::new()),
+                },
+            )?;
+            if inputs.record.len() < o.steps {
+                return Err(CliError::BadOption {
+                    option: "--future-inputs",
+                    message: format!(
+                        "{} has {} rows, fewer than --steps {}",
+                        path.display(),
+                        inputs.record.len(),
+                        o.steps
+                    ),
+                });
+            }
+            inputs.record.u.columns(0, o.steps).clone_owned()
+        }
+    };
+    let forecast = model
+        .forecast(&file.record, &future, o.steps)
+        .map_err(in_data(&o.data.data))?;
+    let z = Normal::standard().inverse_cdf(0.5 + o.level / 2.0);
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    let mut header = vec!["step".to_string()];
+    for name in &file.output_names {
+        header.extend([
+            name.clone(),
+            format!("{name}_sd"),
+            format!("{name}_lower"),
+            format!("{name}_upper"),
+        ]);
+    }
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    for j in 0..o.steps {
+        let mut row = vec![(j + 1).to_string()];
+        for i in 0..model.p() {
+            let (mean, sd) = (forecast.mean[(i, j)], forecast.sd[(i, j)]);
+            row.extend([mean, sd, mean - z * sd, mean + z * sd].map(fmt));
+        }
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.commit()?;
+    let last: Vec<String> = file
+        .output_names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let (mean, sd) = (
+                forecast.mean[(i, o.steps - 1)],
+                forecast.sd[(i, o.steps - 1)],
+            );
+            format!("{name} {mean:.6} ± {:.6}", z * sd)
+        })
+        .collect();
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "forecast", "steps": o.steps, "level": o.level, "z": z,
+            "outputs": file.output_names, "out": o.out,
+            "last": forecast.mean.column(o.steps - 1).iter().collect::<Vec<_>>(),
+        }),
+        || {
+            format!(
+                "{} steps ahead ({} % intervals): {}; wrote {}",
+                o.steps,
+                100.0 * o.level,
+                last.join(", "),
+                o.out.display()
+            )
+        },
+    );
+    Ok(())
+}

@@ -91,9 +91,10 @@ enum Command {
         after_help = "Examples:\n  sysid demo\n  sysid demo --out-dir /tmp/figures --force\n  sysid demo --full          # the paper's scale: 200 runs x 1000 iterations (about 25 min on 2 cores)"
     )]
     Demo(commands::demo::Options),
-    /// Simulate a canonical system and write its data as CSV (t, u1.., y1.., [x1..]).
+    /// Simulate a canonical system and write its data as CSV (t, u1.., y1.., [x1..]), or
+    /// a model file's response to a record's inputs (--model, --data).
     #[command(
-        after_help = "Examples:\n  sysid simulate lti2x2 --steps 200 --seed 1 --out d.csv --model-out true.json\n  sysid simulate nlbench --steps 1000 --out nl.csv\n  sysid simulate wiener --steps 1000 --out w.csv"
+        after_help = "Examples:\n  sysid simulate lti2x2 --steps 200 --seed 1 --out d.csv --model-out true.json\n  sysid simulate nlbench --steps 1000 --out nl.csv\n  sysid simulate wiener --steps 1000 --out w.csv\n  sysid simulate --model fit.json --data val.csv --out sim.csv          # noise-free, x0 by least squares\n  sysid simulate --model fit.json --data inputs.csv --noise --seed 3 --out sim.csv"
     )]
     Simulate(commands::simulate::Options),
     /// Identify a linear state-space model by N4SID and write it as JSON.

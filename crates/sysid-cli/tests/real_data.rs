@@ -1054,3 +1054,112 @@ fn forecast_matches_statsmodels_on_co2() {
         s(&dir.join("f2.csv")),
     ]));
 }
+
+/// `simulate --model --data`: the noise-free response with the least-squares initial
+/// state has `compare`'s simulation fit; an inputs-only file runs from the model's mu;
+/// a noisy realisation is reproducible by its seed.
+#[test]
+fn simulate_a_model_on_a_records_inputs() {
+    let dir = scratch_dir();
+    let (estimation, validation) = halves(&dir, "heating_system.csv");
+    let model = dir.join("m.json");
+    assert_ok(&sysid(&[
+        "n4sid",
+        "--data",
+        s(&estimation),
+        "--order",
+        "3",
+        "--out",
+        s(&model),
+    ]));
+    let sim = dir.join("sim.csv");
+    let result = summary(&sysid(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--data",
+        s(&validation),
+        "--out",
+        s(&sim),
+        "--json",
+    ]));
+    let compared = summary(&sysid(&[
+        "compare",
+        "--model",
+        s(&model),
+        "--data",
+        s(&validation),
+        "--json",
+    ]));
+    assert_eq!(
+        result["fit_percent"][0],
+        compared["models"][0]["fit_percent"][0]
+    );
+    assert_eq!(result["x0_from"], "estimate");
+    // the simulated file has the record's columns
+    let text = std::fs::read_to_string(&sim).unwrap();
+    assert_eq!(text.lines().next().unwrap(), "t,u1,y1");
+    // inputs only: from the model's initial mean, no fit
+    let inputs = dir.join("inputs.csv");
+    let rows: Vec<String> = std::fs::read_to_string(&validation)
+        .unwrap()
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+        .collect();
+    std::fs::write(&inputs, rows.join("\n") + "\n").unwrap();
+    let result = summary(&sysid(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--data",
+        s(&inputs),
+        "--out",
+        s(&sim),
+        "--force",
+        "--json",
+    ]));
+    assert_eq!(result["x0_from"], "model");
+    assert!(result["fit_percent"].is_null());
+    let bad = sysid(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--data",
+        s(&inputs),
+        "--x0",
+        "estimate",
+        "--out",
+        s(&dir.join("x.csv")),
+    ]);
+    assert_one_line_error(&bad, &["--x0", "estimate needs the record's outputs"]);
+    // a realisation: same seed, same numbers; another seed, others
+    let noisy = |seed: &str, name: &str| {
+        let out = dir.join(name);
+        assert_ok(&sysid(&[
+            "simulate",
+            "--model",
+            s(&model),
+            "--data",
+            s(&validation),
+            "--noise",
+            "--seed",
+            seed,
+            "--out",
+            s(&out),
+        ]));
+        std::fs::read_to_string(out).unwrap()
+    };
+    assert_eq!(noisy("3", "a.csv"), noisy("3", "b.csv"));
+    assert_ne!(noisy("3", "c.csv"), noisy("4", "d.csv"));
+    let both = sysid(&[
+        "simulate",
+        "lgss",
+        "--model",
+        s(&model),
+        "--data",
+        s(&validation),
+        "--out",
+        s(&dir.join("y.csv")),
+    ]);
+    assert_one_line_error(&both, &["either a system", "not both"]);
+}

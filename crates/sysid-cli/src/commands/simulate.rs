@@ -9,8 +9,25 @@ use sysid::models::System;
 #[derive(clap::Args, Debug)]
 pub struct Options {
     /// System name: lgss, lti2x2, nlbench or wiener (the blind Wiener system; its
-    /// input is not written, it is unobserved).
-    pub system: String,
+    /// input is not written, it is unobserved). Omit it to simulate a model file's
+    /// response to a record's inputs (--model, --data).
+    pub system: Option<String>,
+    /// Model file whose response to the inputs of --data is simulated (noise-free unless
+    /// --noise), written with the data's output names.
+    #[arg(long, requires = "data")]
+    pub model: Option<PathBuf>,
+    /// Record whose inputs drive --model (its outputs, if any, fix the initial state by
+    /// least squares and are compared with the simulation).
+    #[arg(long, requires = "model")]
+    pub data: Option<PathBuf>,
+    /// With --model: the initial state, `estimate` (least squares against the record's
+    /// outputs; the default when it has them), `model` (the model's mu) or `zero`.
+    #[arg(long)]
+    pub x0: Option<String>,
+    /// With --model: one realisation with the model's process and measurement noise
+    /// (seeded by --seed), started from the initial state chosen by --x0.
+    #[arg(long)]
+    pub noise: bool,
     /// Number of time steps.
     #[arg(long, default_value_t = 1000)]
     pub steps: usize,
@@ -35,20 +52,31 @@ pub struct Options {
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    let Some(system_name) = o.system.as_deref() else {
+        return super::simulate_model::run(o);
+    };
+    if o.model.is_some() {
+        return Err(CliError::BadOption {
+            option: "--model",
+            message: format!(
+                "give either a system ({system_name}) or --model with --data, not both"
+            ),
+        });
+    }
     if o.steps == 0 {
         return Err(CliError::BadOption {
             option: "--steps",
             message: "must be at least 1".into(),
         });
     }
-    if o.system == "nlbench" {
+    if system_name == "nlbench" {
         return run_nlbench(o);
     }
-    if o.system == "wiener" {
+    if system_name == "wiener" {
         return run_wiener(o);
     }
-    let system = System::from_name(&o.system).ok_or_else(|| CliError::UnknownSystem {
-        name: o.system.clone(),
+    let system = System::from_name(system_name).ok_or_else(|| CliError::UnknownSystem {
+        name: system_name.to_string(),
         known: System::ALL.map(System::name).join(", ") + ", nlbench, wiener",
     })?;
     let sim = system

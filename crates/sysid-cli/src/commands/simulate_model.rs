@@ -1,0 +1,140 @@
+//! `sysid simulate --model M --data D`: a model's response to a record's inputs.
+
+use super::simulate::Options;
+use crate::error::CliError;
+use crate::files::{ColumnChoice, create_output, fmt, read_data, read_model};
+use nalgebra::DVector;
+use rand::SeedableRng;
+use std::io::Write;
+use sysid::kalman::{Record, fit_percent};
+
+pub fn run(o: &Options) -> Result<(), CliError> {
+    let (Some(model_path), Some(data_path)) = (&o.model, &o.data) else {
+        return Err(CliError::BadOption {
+            option: "simulate",
+            message: "give a system name (lgss, lti2x2, nlbench, wiener), or --model with --data"
+                .into(),
+        });
+    };
+    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    let model = read_model(model_path)?;
+    let file = read_data(data_path, &ColumnChoice::default())?;
+    super::check_column_counts(&file, model.m(), file.output_names.len())?;
+    let has_outputs = !file.output_names.is_empty();
+    if has_outputs {
+        super::check_columns(&model, &file)?;
+    }
+    let x0_choice =
+        o.x0.as_deref()
+            .unwrap_or(if has_outputs { "estimate" } else { "model" });
+    let model_error = |source| CliError::Model {
+        path: model_path.clone(),
+        source,
+    };
+    // the record the simulation runs on: the data's inputs, outputs if there are any
+    let record = if has_outputs {
+        file.record.clone()
+    } else {
+        Record::new(
+            file.record.u.clone(),
+            nalgebra::DMatrix::from_element(model.p(), file.record.len(), f64::NAN),
+        )
+    };
+    let x0 = match x0_choice {
+        "estimate" if !has_outputs => {
+            return Err(CliError::BadOption {
+                option: "--x0",
+                message: format!(
+                    "estimate needs the record's outputs; {} has none (use model or zero)",
+                    data_path.display()
+                ),
+            });
+        }
+        "estimate" => {
+            model
+                .response(&record, None)
+                .map_err(model_error)?
+                .initial_state
+        }
+        "model" => model.mu().clone(),
+        "zero" => DVector::zeros(model.n()),
+        other => {
+            return Err(CliError::BadOption {
+                option: "--x0",
+                message: format!("unknown initial state {other:?} (known: estimate, model, zero)"),
+            });
+        }
+    };
+    let outputs = if o.noise {
+        // a realisation: the noise of the model, from x0 (no initial uncertainty)
+        let start = model
+            .to_builder()
+            .mu(x0.clone())
+            .p1(nalgebra::DMatrix::zeros(model.n(), model.n()))
+            .diffuse(nalgebra::DMatrix::zeros(model.n(), 0))
+            .build()
+            .map_err(model_error)?;
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(o.seed);
+        start
+            .simulate(&record.u, &mut rng)
+            .map_err(model_error)?
+            .record
+            .y
+    } else {
+        model
+            .response(&record, Some(&x0))
+            .map_err(model_error)?
+            .outputs
+    };
+    let names: Vec<String> = if has_outputs {
+        file.output_names.clone()
+    } else {
+        (1..=model.p()).map(|i| format!("y{i}")).collect()
+    };
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    let mut header = vec!["t".to_string()];
+    header.extend(file.input_names.iter().cloned());
+    header.extend(names.iter().cloned());
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    for t in 0..record.len() {
+        let mut row = vec![fmt(file.time[t])];
+        row.extend(record.u.column(t).iter().map(|&v| fmt(v)));
+        row.extend(outputs.column(t).iter().map(|&v| fmt(v)));
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.commit()?;
+    let fit = has_outputs.then(|| fit_percent(&record.y, &outputs, 0));
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "simulate", "model": model_path, "data": data_path,
+            "steps": record.len(), "x0": x0.iter().collect::<Vec<_>>(), "x0_from": x0_choice,
+            "noise": o.noise, "seed": o.noise.then_some(o.seed), "outputs": names,
+            "fit_percent": fit, "out": o.out,
+        }),
+        || {
+            let fit_text = fit
+                .as_ref()
+                .map(|f| {
+                    let per: Vec<String> = names
+                        .iter()
+                        .zip(f)
+                        .map(|(n, v)| format!("{n} {v:.2} %"))
+                        .collect();
+                    format!(" (fit to the record: {})", per.join(", "))
+                })
+                .unwrap_or_default();
+            format!(
+                "wrote the {} response of {} to {}{fit_text}",
+                if o.noise { "noisy" } else { "noise-free" },
+                model_path.display(),
+                o.out.display()
+            )
+        },
+    );
+    Ok(())
+}

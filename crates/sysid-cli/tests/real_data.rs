@@ -363,7 +363,8 @@ fn a_huge_p1_is_refused_and_the_exact_diffuse_option_matches_statsmodels() {
 /// `UnobservedComponents(y, "llevel", use_exact_diffuse=True)` maximises): statsmodels
 /// 0.15.0 reaches -633.4645636362458 at R = 15098.518, Q = 1469.177 (BFGS, Nelder-Mead,
 /// BFGS). `fit lti --initial diffuse` reaches it (measured: within 1e-13), and writes
-/// the model's initial state as diffuse, A = 1 being a unit root.
+/// the model's initial state as diffuse, A = 1 being a unit root; its standard errors
+/// are statsmodels' numerical-Hessian ones.
 #[test]
 fn nile_local_level_with_a_diffuse_start_reaches_statsmodels_maximum() {
     let (result, fitted) = fit_from_file(
@@ -383,6 +384,20 @@ fn nile_local_level_with_a_diffuse_start_reaches_statsmodels_maximum() {
     let q = fitted["q"][0][0].as_f64().unwrap();
     assert!((r / 15098.518 - 1.0).abs() < 1e-4, "R {r}");
     assert!((q / 1469.177 - 1.0).abs() < 1e-3, "Q {q}");
+    // standard errors: statsmodels' numerical-Hessian ones (`fit(cov_type="approx")`):
+    // 3145.548054571776 (R), 1280.375616587156 (Q); measured within 0.01 %
+    let parameters = result["parameters"].as_array().unwrap();
+    for (name, want) in [("Q[1,1]", 1280.375616587156), ("R[1,1]", 3145.548054571776)] {
+        let p = parameters.iter().find(|p| p["name"] == name).unwrap();
+        let se = p["std_error"].as_f64().unwrap();
+        assert!(
+            (se / want - 1.0).abs() < 0.02,
+            "{name}: {se} vs statsmodels {want}"
+        );
+        let ci = p["ci95"].as_array().unwrap();
+        let value = p["value"].as_f64().unwrap();
+        assert!((ci[1].as_f64().unwrap() - value - 1.96 * se).abs() < 1e-9 * value.abs());
+    }
     // asked to estimate a diffuse state's P1: a typed error, nothing written
     let dir = scratch_dir();
     let out_file = dir.join("fit.json");

@@ -106,6 +106,13 @@ pub struct Options {
     /// free parameters number at most 20 (structural models), `on`, `off`.
     #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
     pub polish: String,
+    /// Linear EM: standard errors of the free parameters from the observed information
+    /// (the negative Hessian of the exact log-likelihood in the model's entries, by
+    /// central differences; a covariance by its upper triangle), with 95 % confidence
+    /// intervals: `auto` (the default) for at most 20 free parameters, `on`, `off`.
+    /// Black-box models (free A and C) are not identifiable and get none.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
+    pub std_errors: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
     #[arg(long, visible_alias = "iters", default_value_t = 500)]
@@ -488,10 +495,40 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         });
     }
     let loglik = result.loglik.unwrap_or(f64::NEG_INFINITY);
+    let want_errors = match o.std_errors.as_str() {
+        "on" => true,
+        "off" => false,
+        // a black-box model (free A and C) is not identifiable: no errors unless asked
+        _ => {
+            coordinates > 0
+                && coordinates <= POLISH_AUTO_MAX
+                && !(spec.a && spec.c && result.estimate.n() > 1)
+        }
+    };
+    let uncertainty =
+        want_errors.then(|| sysid::em::linear::standard_errors(&result.estimate, records, &spec));
+    let (parameters, table) =
+        match &uncertainty {
+            Some(Ok(u)) => {
+                (
+                    serde_json::json!(u.parameters.iter().map(|p| serde_json::json!({
+                "name": p.name, "value": p.value, "std_error": p.std_error,
+                "ci95": [p.value - 1.96 * p.std_error, p.value + 1.96 * p.std_error],
+            })).collect::<Vec<_>>()),
+                    parameter_table(u),
+                )
+            }
+            Some(Err(e)) => {
+                warnings.push(format!("no standard errors: {e}"));
+                (serde_json::Value::Null, String::new())
+            }
+            None => (serde_json::Value::Null, String::new()),
+        };
     crate::report(
         o.json,
         serde_json::json!({
             "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
+            "parameters": parameters,
             "e_steps": e_steps, "accelerate": o.accelerate,
             "polish": polish.as_ref().map(|p| serde_json::json!({
                 "coordinates": p.parameters, "iterations": p.iterations,
@@ -514,7 +551,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 .unwrap_or_default();
             format!(
                 "loglik {loglik} after {} EM iterations ({e_steps} E-steps, {}){polish_text}; \
-                 {stop} in {:.2} s; wrote {}",
+                 {stop} in {:.2} s; wrote {}{table}",
                 result.iterations,
                 em_stop(&result.termination),
                 started.elapsed().as_secs_f64(),
@@ -538,6 +575,27 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         )));
     }
     Ok(())
+}
+
+/// The estimates as a table (statsmodels' summary): value, standard error, z, 95 %
+/// interval; a leading newline.
+fn parameter_table(u: &sysid::em::linear::Uncertainty) -> String {
+    let mut text = format!(
+        "\n{:>10} {:>14} {:>12} {:>8} {:>14} {:>14}",
+        "parameter", "estimate", "std err", "z", "[0.025", "0.975]"
+    );
+    for p in &u.parameters {
+        text += &format!(
+            "\n{:>10} {:>14.6e} {:>12.4e} {:>8.2} {:>14.6e} {:>14.6e}",
+            p.name,
+            p.value,
+            p.std_error,
+            p.value / p.std_error,
+            p.value - 1.96 * p.std_error,
+            p.value + 1.96 * p.std_error
+        );
+    }
+    text
 }
 
 /// Refuses an option value that is not a finite non-negative number.

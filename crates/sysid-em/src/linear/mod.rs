@@ -29,10 +29,12 @@ mod mstep;
 mod quasi_newton;
 mod spec;
 mod squarem;
+mod uncertainty;
 
 pub use mstep::m_step;
 pub use quasi_newton::{QuasiNewtonOptions, QuasiNewtonOutcome, coordinate_count, maximise_loglik};
 pub use squarem::SquaremLinearEm;
+pub use uncertainty::{ParameterEstimate, Uncertainty, UncertaintyError, standard_errors};
 
 pub use spec::{Covariance, FixedEntries, LinearEmSpec, floor_output_noise, floor_variances};
 

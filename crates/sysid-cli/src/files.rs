@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 use std::fs::File;
 use std::io::Write;
 use std::path::Path;
-use sysid::kalman::{LinearGaussianModel, ModelSpec, Record};
+use sysid::kalman::{LinearGaussianModel, Metadata, ModelSpec, Record};
 use sysid_plot::PendingFile;
 
 /// Starts writing `path` atomically (a temporary file renamed into place by
@@ -62,11 +62,21 @@ pub fn json_error(path: &Path, what: &'static str, e: &serde_json::Error) -> Cli
 
 /// Reads and validates a model file (JSON, `docs/model-format.md`).
 pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
+    Ok(read_model_file(path)?.0)
+}
+
+/// Reads and validates a model file, with its metadata if it has any.
+pub fn read_model_file(path: &Path) -> Result<(LinearGaussianModel, Option<Metadata>), CliError> {
     let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    parse_model(&text, path)
+    let spec: ModelSpec = serde_json::from_str(&text).map_err(|e| json_error(path, "model", &e))?;
+    let model = spec.build().map_err(|source| CliError::Model {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok((model, spec.metadata))
 }
 
 /// Parses and validates the text of a model file; errors name `path`.
@@ -76,6 +86,36 @@ pub fn parse_model(text: &str, path: &Path) -> Result<LinearGaussianModel, CliEr
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// Writes a model file (one row of a matrix per line).
+pub fn write_model(path: &Path, force: bool, spec: &ModelSpec) -> Result<(), CliError> {
+    write_output(path, force, &spec.to_json())
+}
+
+/// FNV-1a (64 bits) over the bits of a record's inputs and outputs, in hexadecimal.
+pub fn fingerprint(record: &Record) -> String {
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for v in record.u.iter().chain(record.y.iter()) {
+        for byte in v.to_bits().to_le_bytes() {
+            hash ^= u64::from(byte);
+            hash = hash.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    format!("{hash:016x}")
+}
+
+/// The metadata of a model fitted on `file` (`path`) by this command line.
+pub fn metadata_of(file: &DataFile, path: &Path) -> Metadata {
+    let command: Vec<String> = std::env::args().collect();
+    Metadata {
+        inputs: file.input_names.clone(),
+        outputs: file.output_names.clone(),
+        command: Some(command.join(" ")),
+        data: Some(path.display().to_string()),
+        data_fingerprint: Some(fingerprint(&file.record)),
+        ..Metadata::default()
+    }
 }
 
 /// Which columns of a data file are inputs and outputs.

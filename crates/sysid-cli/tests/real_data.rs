@@ -1178,3 +1178,93 @@ fn simulate_a_model_on_a_records_inputs() {
     ]);
     assert_one_line_error(&both, &["either a system", "not both"]);
 }
+
+/// Column names chosen at `fit` are stored in the model (with the command, the data's
+/// fingerprint, the log-likelihood, AIC and BIC), so `predict`, `compare`, `resid`,
+/// `simulate`, `loglik` read the same columns without repeating --inputs/--outputs; the
+/// model file has one row of a matrix per line.
+#[test]
+fn column_names_survive_fit_into_the_other_commands() {
+    let dir = scratch_dir();
+    let named = dir.join("named.csv");
+    let text = std::fs::read_to_string(data("heating_system.csv")).unwrap();
+    let (_, body) = text.split_once('\n').unwrap();
+    std::fs::write(&named, format!("time,heater,temperature\n{body}")).unwrap();
+    let model_path = dir.join("named.json");
+    let fitted = summary(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&named),
+        "--inputs",
+        "heater",
+        "--outputs",
+        "temperature",
+        "--order",
+        "2",
+        "--max-iter",
+        "50",
+        "--polish",
+        "off",
+        "--out",
+        s(&model_path),
+        "--json",
+    ]));
+    let text = std::fs::read_to_string(&model_path).unwrap();
+    let file = model(&model_path);
+    let meta = &file["metadata"];
+    assert_eq!(meta["inputs"], serde_json::json!(["heater"]));
+    assert_eq!(meta["outputs"], serde_json::json!(["temperature"]));
+    assert_eq!(meta["order"], 2);
+    assert_eq!(meta["loglik"], fitted["loglik"]);
+    let (loglik, k) = (
+        meta["loglik"].as_f64().unwrap(),
+        meta["parameters"].as_f64().unwrap(),
+    );
+    assert!((meta["aic"].as_f64().unwrap() - (-2.0 * loglik + 2.0 * k)).abs() < 1e-9);
+    assert!(
+        meta["command"]
+            .as_str()
+            .unwrap()
+            .contains("--outputs temperature")
+    );
+    assert_eq!(meta["data_fingerprint"].as_str().unwrap().len(), 16);
+    // one row per line: A's two rows are two lines
+    assert!(
+        text.lines()
+            .filter(|l| l.trim_start().starts_with('[') && l.contains(','))
+            .count()
+            >= 2,
+        "{text}"
+    );
+    // without --inputs/--outputs, the model's names choose the columns
+    let out = dir.join("p.csv");
+    assert_ok(&sysid(&[
+        "predict",
+        "--model",
+        s(&model_path),
+        "--data",
+        s(&named),
+        "--out",
+        s(&out),
+    ]));
+    let header = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
+    assert!(header.starts_with("t,temperature_pred"), "{header}");
+    for args in [
+        vec!["compare", "--model", s(&model_path), "--data", s(&named)],
+        vec!["resid", "--model", s(&model_path), "--data", s(&named)],
+        vec!["loglik", "--model", s(&model_path), "--data", s(&named)],
+    ] {
+        assert_ok(&sysid(&args));
+    }
+    // a file without those columns names what is missing
+    let other = dir.join("other.csv");
+    std::fs::write(&other, "t,u1,y1\n1,0,0\n2,1,1\n").unwrap();
+    let out = sysid(&["compare", "--model", s(&model_path), "--data", s(&other)]);
+    assert_one_line_error(&out, &["heater"]);
+}

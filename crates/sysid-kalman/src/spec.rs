@@ -43,6 +43,54 @@ pub struct ModelSpec {
     /// the default), `stationary` or `diffuse` (then those keys must be absent).
     #[serde(default, skip_serializing_if = "is_given")]
     pub initial: InitialState,
+    /// What the model was made from and how well it fits: names, sample time, the
+    /// command, the fit's figures. Absent in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metadata: Option<Metadata>,
+}
+
+/// A model file's description of its data and of its fit (every entry optional;
+/// unknown entries are kept out of the way of older readers by being ignored).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Metadata {
+    /// Names of the input columns, in the model's order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inputs: Vec<String>,
+    /// Names of the output columns, in the model's order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outputs: Vec<String>,
+    /// Sample time (in the units of the data's time column), when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample_time: Option<f64>,
+    /// The state dimension `n`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub order: Option<usize>,
+    /// Log-likelihood of the estimation data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loglik: Option<f64>,
+    /// Number of free parameters of the fit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parameters: Option<usize>,
+    /// Akaike's criterion `-2 loglik + 2 k`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aic: Option<f64>,
+    /// Schwarz's criterion `-2 loglik + k ln N` (`N` observed values).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bic: Option<f64>,
+    /// Why the estimation stopped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub termination: Option<String>,
+    /// The command line that wrote the model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command: Option<String>,
+    /// The estimation data file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data: Option<String>,
+    /// A fingerprint of the estimation data's values (FNV-1a, 64 bits, over the bits
+    /// of the inputs and outputs, in hexadecimal): tells whether two models were fitted
+    /// on the same numbers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_fingerprint: Option<String>,
 }
 
 fn is_given(initial: &InitialState) -> bool {
@@ -92,7 +140,36 @@ impl ModelSpec {
             p1: Some(rows_of(model.p1())),
             diffuse: model.is_diffuse().then(|| rows_of(model.diffuse())),
             initial: InitialState::Given,
+            metadata: None,
         }
+    }
+
+    /// The file's text: JSON with one row of a matrix per line.
+    pub fn to_json(&self) -> String {
+        let value = serde_json::to_value(self).expect("a model spec serialises");
+        let mut out = String::from("{\n");
+        let serde_json::Value::Object(map) = value else {
+            unreachable!("a struct serialises to an object")
+        };
+        let last = map.len().saturating_sub(1);
+        for (k, (key, v)) in map.iter().enumerate() {
+            let text = match v {
+                serde_json::Value::Array(rows) if rows.iter().any(|r| r.is_array()) => {
+                    let lines: Vec<String> = rows.iter().map(|r| format!("    {r}")).collect();
+                    format!("[\n{}\n  ]", lines.join(",\n"))
+                }
+                serde_json::Value::Object(_) => serde_json::to_string_pretty(v)
+                    .expect("serialises")
+                    .replace('\n', "\n  "),
+                other => other.to_string(),
+            };
+            let comma = if k < last { "," } else { "" };
+            out += &format!(
+                "  {}: {text}{comma}\n",
+                serde_json::Value::String(key.clone())
+            );
+        }
+        out + "}\n"
     }
 
     /// The spec of a model's system, with its initial state described by `initial`

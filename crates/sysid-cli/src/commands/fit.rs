@@ -463,9 +463,19 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     } else {
         InitialState::Diffuse
     };
-    let text = serde_json::to_string_pretty(&ModelSpec::with_initial(&result.estimate, written))
-        .expect("serialises");
-    write_output(&o.out, o.force, &(text + "\n"))?;
+    let mut spec_out = ModelSpec::with_initial(&result.estimate, written);
+    let observed = file.record.y.iter().filter(|v| !v.is_nan()).count() as f64;
+    let k = coordinates as f64;
+    spec_out.metadata = Some(sysid::kalman::Metadata {
+        order: Some(result.estimate.n()),
+        loglik: result.loglik,
+        parameters: Some(coordinates),
+        aic: result.loglik.map(|l| -2.0 * l + 2.0 * k),
+        bic: result.loglik.map(|l| -2.0 * l + k * observed.ln()),
+        termination: Some(stop.to_string()),
+        ..crate::files::metadata_of(&file, &o.data.data)
+    });
+    crate::files::write_model(&o.out, o.force, &spec_out)?;
     if let Some(path) = &o.trace {
         let mut text = String::from("iteration,loglik\n");
         for (k, l) in result.trace.iter().enumerate() {

@@ -20,18 +20,29 @@ pub mod smooth;
 
 use crate::DataArgs;
 use crate::error::CliError;
-use crate::files::{ColumnChoice, DataFile, read_data, read_model};
+use crate::files::{ColumnChoice, DataFile, read_data, read_model_file};
 use std::path::Path;
-use sysid::kalman::LinearGaussianModel;
+use sysid::kalman::{LinearGaussianModel, Metadata};
 
 impl DataArgs {
     /// Reads the data file with the chosen columns.
     pub fn read(&self) -> Result<DataFile, CliError> {
+        self.read_for(None)
+    }
+
+    /// Reads the data file with the chosen columns, or, where none are chosen, the
+    /// columns a model was fitted on (its metadata's names).
+    pub fn read_for(&self, metadata: Option<&Metadata>) -> Result<DataFile, CliError> {
+        let named = |given: &Option<Vec<String>>, stored: Option<&Vec<String>>| {
+            given
+                .clone()
+                .or_else(|| stored.filter(|names| !names.is_empty()).cloned())
+        };
         read_data(
             &self.data,
             &ColumnChoice {
-                inputs: self.inputs.clone(),
-                outputs: self.outputs.clone(),
+                inputs: named(&self.inputs, metadata.map(|m| &m.inputs)),
+                outputs: named(&self.outputs, metadata.map(|m| &m.outputs)),
             },
         )
     }
@@ -66,14 +77,14 @@ pub fn model_and_data(
     initial: &str,
 ) -> Result<(LinearGaussianModel, DataFile), CliError> {
     let path = model;
-    let model = read_model(path)?;
+    let (model, metadata) = read_model_file(path)?;
     let model = parse_initial(initial)?
         .apply(&model)
         .map_err(|source| CliError::Model {
             path: path.to_path_buf(),
             source,
         })?;
-    let file = data.read()?;
+    let file = data.read_for(metadata.as_ref())?;
     check_columns(&model, &file)?;
     Ok((model, file))
 }

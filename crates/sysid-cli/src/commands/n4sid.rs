@@ -1,6 +1,5 @@
 use crate::DataArgs;
 use crate::error::CliError;
-use crate::files::write_output;
 use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
 use sysid::subspace::{
@@ -151,9 +150,15 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
     let file = o.data.read()?;
     let result = n4sid(&file.record, &options)?;
-    let text =
-        serde_json::to_string_pretty(&ModelSpec::from_model(&result.model)).expect("serialises");
-    write_output(&o.out, o.force, &(text + "\n"))?;
+    let mut spec = ModelSpec::from_model(&result.model);
+    let chosen = result.order_scores.iter().find(|s| s.order == result.order);
+    spec.metadata = Some(sysid::kalman::Metadata {
+        order: Some(result.order),
+        loglik: chosen.map(|s| s.loglik),
+        parameters: chosen.map(|s| s.parameters),
+        ..crate::files::metadata_of(&file, &o.data.data)
+    });
+    crate::files::write_model(&o.out, o.force, &spec)?;
     let warnings = subspace_warnings(&result, options.focus == Focus::Simulation);
     let scores: Vec<serde_json::Value> = result
         .order_scores

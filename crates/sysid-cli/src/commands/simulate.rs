@@ -1,5 +1,5 @@
 use crate::error::CliError;
-use crate::files::{create_output, fmt, write_output};
+use crate::files::{create_output, fmt};
 use std::io::Write;
 use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
@@ -109,9 +109,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     }
     w.commit()?;
     if let Some(path) = &o.model_out {
-        let spec = ModelSpec::from_model(&system.model());
-        let text = serde_json::to_string_pretty(&spec).expect("a model spec serialises");
-        write_output(path, o.force, &(text + "\n"))?;
+        crate::files::write_model(path, o.force, &ModelSpec::from_model(&system.model()))?;
     }
     if o.json {
         let summary = serde_json::json!({

@@ -62,11 +62,19 @@ pub fn json_error(path: &Path, what: &'static str, e: &serde_json::Error) -> Cli
 
 /// Reads and validates a model file (JSON, `docs/model-format.md`).
 pub fn read_model(path: &Path) -> Result<LinearGaussianModel, CliError> {
-    Ok(read_model_file(path)?.0)
+    Ok(read_model_file(path)?.model)
+}
+
+/// A model file's contents.
+pub struct ModelFile {
+    pub model: LinearGaussianModel,
+    pub metadata: Option<Metadata>,
+    /// How the file describes a record's initial state.
+    pub initial: sysid::kalman::InitialState,
 }
 
 /// Reads and validates a model file, with its metadata if it has any.
-pub fn read_model_file(path: &Path) -> Result<(LinearGaussianModel, Option<Metadata>), CliError> {
+pub fn read_model_file(path: &Path) -> Result<ModelFile, CliError> {
     let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
         path: path.to_path_buf(),
         source,
@@ -76,7 +84,11 @@ pub fn read_model_file(path: &Path) -> Result<(LinearGaussianModel, Option<Metad
         path: path.to_path_buf(),
         source,
     })?;
-    Ok((model, spec.metadata))
+    Ok(ModelFile {
+        model,
+        metadata: spec.metadata,
+        initial: spec.initial,
+    })
 }
 
 /// Parses and validates the text of a model file; errors name `path`.

@@ -57,6 +57,11 @@ pub(crate) struct DataArgs {
     /// Output columns, comma separated (default: every column named y1, y2, ...).
     #[arg(long, value_delimiter = ',')]
     outputs: Option<Vec<String>>,
+    /// Use only the data rows START..=END (1-based, the header not counted; either
+    /// side may be left out: `401:` is row 401 to the end), e.g. to fit on one segment
+    /// of a file and validate on another.
+    #[arg(long)]
+    range: Option<String>,
 }
 
 /// A model file, data, and where the states go (`filter`, `smooth`).
@@ -108,7 +113,7 @@ enum Command {
         after_help = "Examples:\n  sysid fit lti --data d.csv --order 8 --out fit.json --trace trace.csv\n  sysid fit lti --data d.csv --init start.json --fix D=0 --diag R --out fit.json\n  sysid fit nlbench --data nl.csv --max-iter 200 --particles 50 --out nl-fit.json\n  sysid fit nlbench --data nl.csv --method psaem --particles 15 --iters 2000 --estimate-noise=q --out nl-fit.json
   sysid fit lti --data d.csv --order 8 --min-variance 1e-8 --out fit.json\n  sysid fit wiener --data w.csv --max-iter 100 --out wiener.json"
     )]
-    Fit(commands::fit::Options),
+    Fit(Box<commands::fit::Options>),
     /// Print the exact log-likelihood of data under a model (square-root Kalman filter).
     #[command(
         after_help = "Examples:\n  sysid loglik --model true.json --data d.csv\n  sysid loglik --model fit.json --data d.csv --json\n  sysid loglik --model fit.json --data other.csv --initial diffuse"

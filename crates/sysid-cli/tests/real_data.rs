@@ -1268,3 +1268,140 @@ fn column_names_survive_fit_into_the_other_commands() {
     let out = sysid(&["compare", "--model", s(&model_path), "--data", s(&other)]);
     assert_one_line_error(&out, &["heater"]);
 }
+
+/// `fit lti --detrend mean` fits the centred signals and writes a model of the
+/// original ones (the means folded into h): on the raw heating record its simulation
+/// and prediction fits equal those of the same fit on a centred copy, scored on that
+/// copy; the means are in the metadata.
+#[test]
+fn detrend_mean_gives_a_model_of_the_original_signals() {
+    let dir = scratch_dir();
+    let raw = data("heating_system.csv");
+    let text = std::fs::read_to_string(&raw).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let mean = |c: usize| rows.iter().map(|r| r[c]).sum::<f64>() / rows.len() as f64;
+    let (mu, my) = (mean(1), mean(2));
+    let centred = dir.join("centred.csv");
+    let body: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{},{},{}", r[0], r[1] - mu, r[2] - my))
+        .collect();
+    std::fs::write(&centred, format!("t,u1,y1\n{}\n", body.join("\n"))).unwrap();
+    let fit = |data: &PathBuf, extra: &[&str], out: &str| {
+        let out = dir.join(out);
+        let mut args = vec![
+            "fit",
+            "lti",
+            "--data",
+            s(data),
+            "--order",
+            "3",
+            "--max-iter",
+            "60",
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        assert_ok(&sysid(&args));
+        out
+    };
+    let detrended = fit(&raw, &["--detrend", "mean"], "detrended.json");
+    let plain = fit(&centred, &[], "plain.json");
+    let fits = |m: &PathBuf, d: &PathBuf, horizon: &str| {
+        let r = summary(&sysid(&[
+            "compare",
+            "--model",
+            s(m),
+            "--data",
+            s(d),
+            "--horizon",
+            horizon,
+            "--burn-in",
+            "20",
+            "--json",
+        ]));
+        r["models"][0]["fit_percent"][0].as_f64().unwrap()
+    };
+    for horizon in ["inf", "1"] {
+        let (a, b) = (
+            fits(&detrended, &raw, horizon),
+            fits(&plain, &centred, horizon),
+        );
+        assert!((a - b).abs() < 1e-6, "horizon {horizon}: {a} vs {b}");
+        assert!(a > 60.0, "horizon {horizon}: fit {a}");
+    }
+    let meta = &model(&detrended)["metadata"]["detrend"];
+    assert_eq!(meta["kind"], "mean");
+    assert!((meta["outputs"][0].as_f64().unwrap() - my).abs() < 1e-9 * my.abs());
+    let bad = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&raw),
+        "--order",
+        "2",
+        "--detrend",
+        "linearly",
+        "--out",
+        s(&dir.join("x.json")),
+    ]);
+    assert_one_line_error(&bad, &["--detrend", "none, mean"]);
+}
+
+/// `--range` picks rows of one file: fitting on rows 1-400 and comparing on 401- gives
+/// what the same commands give on two files holding those rows; a range outside the
+/// file is named.
+#[test]
+fn range_picks_estimation_and_validation_rows_of_one_file() {
+    let dir = scratch_dir();
+    let raw = data("heating_system.csv");
+    let text = std::fs::read_to_string(&raw).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let part = |name: &str, rows: &[&str]| {
+        let path = dir.join(name);
+        std::fs::write(&path, format!("{}\n{}\n", lines[0], rows.join("\n"))).unwrap();
+        path
+    };
+    let (first, second) = (
+        part("first.csv", &lines[1..401]),
+        part("second.csv", &lines[401..]),
+    );
+    let fitted = |data: &PathBuf, range: Option<&str>, out: &str| {
+        let out = dir.join(out);
+        let mut args = vec!["n4sid", "--data", s(data), "--order", "3", "--out", s(&out)];
+        if let Some(r) = range {
+            args.extend_from_slice(&["--range", r]);
+        }
+        assert_ok(&sysid(&args));
+        out
+    };
+    let ranged = fitted(&raw, Some(":400"), "ranged.json");
+    let split = fitted(&first, None, "split.json");
+    let fit_of = |m: &PathBuf, d: &PathBuf, range: Option<&str>| {
+        let mut args = vec!["compare", "--model", s(m), "--data", s(d), "--json"];
+        if let Some(r) = range {
+            args.extend_from_slice(&["--range", r]);
+        }
+        summary(&sysid(&args))["models"][0]["fit_percent"][0]
+            .as_f64()
+            .unwrap()
+    };
+    assert_eq!(
+        fit_of(&ranged, &raw, Some("401:")),
+        fit_of(&split, &second, None)
+    );
+    let bad = sysid(&[
+        "compare",
+        "--model",
+        s(&ranged),
+        "--data",
+        s(&raw),
+        "--range",
+        "700:900",
+    ]);
+    assert_one_line_error(&bad, &["--range", "700 to 900", "1 to 801"]);
+}

@@ -13,8 +13,10 @@ pub enum InitialState {
     /// The model's `mu`, `P1` and diffuse directions as given.
     #[default]
     Given,
-    /// `mu = 0` and `P1` the stationary covariance `P = A P A' + Q` of the state noise
-    /// (needs a stable `A`): a record of a time series in steady state.
+    /// `P1` the stationary covariance `P = A P A' + Q` of the state noise (needs a
+    /// stable `A`) and `mu` the steady state of the record's first input,
+    /// `(I - A)^{-1} B u_1` (0 without inputs, or through [`InitialState::apply`]): a
+    /// record that starts in steady state.
     Stationary,
     /// Every direction of `x_1` diffuse (`A_d = I`, `P1 = 0`): nothing is assumed of
     /// the initial state; the data determine it (exact diffuse initialisation).
@@ -40,6 +42,29 @@ impl InitialState {
                 .diffuse(DMatrix::identity(n, n)),
         };
         builder.mu(DVector::zeros(n)).build()
+    }
+
+    /// [`apply`](Self::apply) for a given record: a stationary initial state starts at
+    /// the steady state of the record's first input, `mu = (I - A)^{-1} B u_1`.
+    ///
+    /// # Errors
+    /// As [`apply`](Self::apply).
+    pub fn apply_to_record(
+        self,
+        model: &LinearGaussianModel,
+        record: &crate::Record,
+    ) -> Result<LinearGaussianModel> {
+        let applied = self.apply(model)?;
+        if self != InitialState::Stationary || model.m() == 0 || record.is_empty() {
+            return Ok(applied);
+        }
+        let n = model.n();
+        let forced = model.b() * record.u.column(0);
+        let mu = (DMatrix::identity(n, n) - model.a())
+            .lu()
+            .solve(&forced)
+            .unwrap_or_else(|| DVector::zeros(n));
+        applied.to_builder().mu(mu).build()
     }
 }
 

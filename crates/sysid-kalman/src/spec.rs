@@ -49,6 +49,17 @@ pub struct ModelSpec {
     pub metadata: Option<Metadata>,
 }
 
+/// Means removed from the signals before a fit (`--detrend mean`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Detrend {
+    /// `mean`.
+    pub kind: String,
+    /// The inputs' means.
+    pub inputs: Vec<f64>,
+    /// The outputs' means.
+    pub outputs: Vec<f64>,
+}
+
 /// A model file's description of its data and of its fit (every entry optional;
 /// unknown entries are kept out of the way of older readers by being ignored).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -59,6 +70,10 @@ pub struct Metadata {
     /// Names of the output columns, in the model's order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outputs: Vec<String>,
+    /// The detrending the model was fitted with, already folded into its offset `h`
+    /// (and `mu`): the model describes the original signals.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detrend: Option<Detrend>,
     /// Sample time (in the units of the data's time column), when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sample_time: Option<f64>,

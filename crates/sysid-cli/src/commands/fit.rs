@@ -113,6 +113,11 @@ pub struct Options {
     /// Black-box models (free A and C) are not identifiable and get none.
     #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
     pub std_errors: String,
+    /// Linear EM: `mean` removes each signal's mean before the fit and folds the means
+    /// into the written model's offset h (and mu), so that it describes, predicts and
+    /// simulates the original signals; `none` (the default) fits them as they are.
+    #[arg(long, default_value = "none")]
+    pub detrend: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
     #[arg(long, visible_alias = "iters", default_value_t = 500)]
@@ -264,7 +269,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         option: "--max-iter/--tol",
         message: e.to_string(),
     })?;
-    let file = o.data.read()?;
+    let mut file = o.data.read()?;
+    let means = super::detrend::parse(&o.detrend)?.then(|| super::detrend::centre(&mut file));
     non_negative("--min-variance", o.min_variance)?;
     non_negative("--min-output-noise", o.min_output_noise)?;
     let mut spec = LinearEmSpec {
@@ -276,7 +282,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         ..LinearEmSpec::default()
     };
     let start = super::parse_initial(&o.initial)?
-        .apply(&initial_model(o, &file)?)
+        .apply_to_record(&initial_model(o, &file)?, &file.record)
         .map_err(|source| CliError::BadOption {
             option: "--initial",
             message: source.to_string(),
@@ -463,7 +469,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     } else {
         InitialState::Diffuse
     };
-    let mut spec_out = ModelSpec::with_initial(&result.estimate, written);
+    let described = match &means {
+        Some(m) => super::detrend::fold(&result.estimate, m)?,
+        None => result.estimate.clone(),
+    };
+    let mut spec_out = ModelSpec::with_initial(&described, written);
     let observed = file.record.y.iter().filter(|v| !v.is_nan()).count() as f64;
     let k = coordinates as f64;
     spec_out.metadata = Some(sysid::kalman::Metadata {
@@ -473,6 +483,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         aic: result.loglik.map(|l| -2.0 * l + 2.0 * k),
         bic: result.loglik.map(|l| -2.0 * l + k * observed.ln()),
         termination: Some(stop.to_string()),
+        detrend: means.as_ref().map(|m| sysid::kalman::Detrend {
+            kind: "mean".into(),
+            inputs: m.inputs.iter().copied().collect(),
+            outputs: m.outputs.iter().copied().collect(),
+        }),
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     crate::files::write_model(&o.out, o.force, &spec_out)?;

@@ -2,6 +2,7 @@
 
 pub mod compare;
 pub mod demo;
+pub mod detrend;
 pub mod fit;
 pub mod fit_affine;
 pub mod fit_wiener;
@@ -38,14 +39,51 @@ impl DataArgs {
                 .clone()
                 .or_else(|| stored.filter(|names| !names.is_empty()).cloned())
         };
-        read_data(
+        let file = read_data(
             &self.data,
             &ColumnChoice {
                 inputs: named(&self.inputs, metadata.map(|m| &m.inputs)),
                 outputs: named(&self.outputs, metadata.map(|m| &m.outputs)),
             },
-        )
+        )?;
+        match &self.range {
+            None => Ok(file),
+            Some(range) => rows(file, range),
+        }
     }
+}
+
+/// The rows `START..=END` (1-based) of a data file, from `--range START:END`.
+fn rows(mut file: DataFile, range: &str) -> Result<DataFile, CliError> {
+    let total = file.record.len();
+    let bad = |message: String| CliError::BadOption {
+        option: "--range",
+        message,
+    };
+    let (start, end) = range
+        .split_once(':')
+        .ok_or_else(|| bad(format!("{range:?} is not START:END (e.g. 1:400, 401:)")))?;
+    let bound = |text: &str, default: usize| -> Result<usize, CliError> {
+        if text.trim().is_empty() {
+            return Ok(default);
+        }
+        text.trim()
+            .parse::<usize>()
+            .map_err(|_| bad(format!("{text:?} is not a row number")))
+    };
+    let (start, end) = (bound(start, 1)?, bound(end, total)?);
+    if start == 0 || start > end || end > total {
+        return Err(bad(format!(
+            "rows {start} to {end} are not within the file's 1 to {total}"
+        )));
+    }
+    let (from, len) = (start - 1, end - start + 1);
+    file.record = sysid::kalman::Record::new(
+        file.record.u.columns(from, len).clone_owned(),
+        file.record.y.columns(from, len).clone_owned(),
+    );
+    file.time = file.time[from..from + len].to_vec();
+    Ok(file)
 }
 
 /// Checks that a data file has as many input and output columns as the model.
@@ -77,15 +115,22 @@ pub fn model_and_data(
     initial: &str,
 ) -> Result<(LinearGaussianModel, DataFile), CliError> {
     let path = model;
-    let (model, metadata) = read_model_file(path)?;
-    let model = parse_initial(initial)?
-        .apply(&model)
+    let stored = read_model_file(path)?;
+    let file = data.read_for(stored.metadata.as_ref())?;
+    let model = stored.model;
+    check_columns(&model, &file)?;
+    // `model`: the file's own initial state (a stationary one, at this record's first
+    // input)
+    let initial = match parse_initial(initial)? {
+        sysid::kalman::InitialState::Given => stored.initial,
+        chosen => chosen,
+    };
+    let model = initial
+        .apply_to_record(&model, &file.record)
         .map_err(|source| CliError::Model {
             path: path.to_path_buf(),
             source,
         })?;
-    let file = data.read_for(metadata.as_ref())?;
-    check_columns(&model, &file)?;
     Ok((model, file))
 }
 

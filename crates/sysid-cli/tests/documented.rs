@@ -1,0 +1,98 @@
+//! Every `sysid` command the README's tour and `docs/guide.md` show is run here, in
+//! order, as a user would type it (from the repository's root: the data paths are the
+//! repository's fixtures), and must succeed.
+
+mod common;
+use common::scratch_dir;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The `sysid` lines of the first ```sh block after the line containing `marker`.
+fn commands(file: &str, marker: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(root().join(file)).unwrap();
+    let after = &text[text
+        .find(marker)
+        .unwrap_or_else(|| panic!("{file}: no {marker:?}"))..];
+    let block = after
+        .split("```sh\n")
+        .nth(1)
+        .unwrap()
+        .split("```")
+        .next()
+        .unwrap();
+    let lines: Vec<String> = block
+        .lines()
+        .map(|l| l.split(" #").next().unwrap().trim().to_string())
+        .filter(|l| l.starts_with("sysid "))
+        .collect();
+    assert!(
+        !lines.is_empty(),
+        "{file}: no sysid command after {marker:?}"
+    );
+    lines
+}
+
+/// Runs each command in a fresh folder, as `sysid` from the repository's root.
+fn run_all(lines: &[String]) -> PathBuf {
+    let dir = scratch_dir();
+    let data = root().join("crates/sysid-cli/tests/data/");
+    for line in lines {
+        let args: Vec<String> = line
+            .split_whitespace()
+            .skip(1)
+            .map(|a| a.replace("crates/sysid-cli/tests/data/", data.to_str().unwrap()))
+            .collect();
+        let out = Command::new(env!("CARGO_BIN_EXE_sysid"))
+            .args(&args)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "`{line}` failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    dir
+}
+
+#[test]
+fn the_readme_tour_runs() {
+    let dir = run_all(&commands("README.md", "## A 30-second tour"));
+    for file in ["fit.json", "smoothed.csv", "nl.json", "chains.csv"] {
+        assert!(dir.join(file).exists(), "{file}");
+    }
+}
+
+/// The `sysid` lines of every ```sh block of a file, in order.
+fn all_commands(file: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(root().join(file)).unwrap();
+    text.split("```sh\n")
+        .skip(1)
+        .flat_map(|block| block.split("```").next().unwrap().lines())
+        .map(|l| l.split(" #").next().unwrap().trim().to_string())
+        .filter(|l| l.starts_with("sysid "))
+        .collect()
+}
+
+#[test]
+fn every_command_of_the_guide_runs() {
+    let walkthrough = commands("docs/guide.md", "<!-- walkthrough");
+    assert!(walkthrough.len() >= 8, "{walkthrough:?}");
+    let lines = all_commands("docs/guide.md");
+    assert!(walkthrough.iter().all(|l| lines.contains(l)));
+    let dir = run_all(&lines);
+    for file in [
+        "heat.json",
+        "heat-figures/compare.svg",
+        "heat-figures/resid.png",
+        "heat-pred5.csv",
+        "nile-forecast.csv",
+    ] {
+        assert!(dir.join(file).exists(), "{file}");
+    }
+}

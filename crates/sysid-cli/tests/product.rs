@@ -254,7 +254,9 @@ fn plot_draws_traces_models_and_data() {
         &figures,
         "bode",
         &[
-            "G12 (input u2 to output y1)",
+            "G12 (u2 to y1): magnitude",
+            "G12 (u2 to y1): phase",
+            "phase (degrees)",
             "n4sid",
             "fit",
             "magnitude (dB)",

@@ -246,40 +246,67 @@ fn bode_figure(models: &[(String, LinearGaussianModel)]) -> Result<Figure, CliEr
     let grid: Vec<f64> = (0..240)
         .map(|k| std::f64::consts::PI * 10f64.powf(-2.5 + 2.5 * k as f64 / 239.0))
         .collect();
+    // per output: a row of magnitudes, then a row of phases, one column per input
     let mut panels = Vec::new();
     for i in 0..p {
+        let channel = |j: usize| format!("G{}{} (u{} to y{})", i + 1, j + 1, j + 1, i + 1);
+        let mut phases = Vec::new();
         for j in 0..m {
-            let mut panel = Panel::new(
-                format!(
-                    "G{}{} (input u{} to output y{})",
-                    i + 1,
-                    j + 1,
-                    j + 1,
-                    i + 1
-                ),
+            let mut magnitude = Panel::new(
+                format!("{}: magnitude", channel(j)),
                 "frequency (rad/sample)",
                 "magnitude (dB)",
             )
             .scales(Scale::Log, Scale::Linear);
+            let mut phase = Panel::new(
+                format!("{}: phase", channel(j)),
+                "frequency (rad/sample)",
+                "phase (degrees)",
+            )
+            .scales(Scale::Log, Scale::Linear);
             for (name, model) in models {
-                let points = grid
+                let response: Vec<Option<nalgebra::Complex<f64>>> = grid
                     .iter()
-                    .map(|&w| {
-                        (
-                            w,
-                            model
-                                .frequency_response(w)
-                                .map_or(f64::NAN, |g| 20.0 * g[(i, j)].norm().log10()),
-                        )
-                    })
+                    .map(|&w| model.frequency_response(w).map(|g| g[(i, j)]))
                     .collect();
-                panel = panel.with_series(Series::line(name.clone(), points));
+                let db = grid
+                    .iter()
+                    .zip(&response)
+                    .map(|(&w, g)| (w, g.map_or(f64::NAN, |g| 20.0 * g.norm().log10())))
+                    .collect();
+                magnitude = magnitude.with_series(Series::line(name.clone(), db));
+                let degrees = unwrapped_degrees(&response);
+                phase = phase.with_series(Series::line(
+                    name.clone(),
+                    grid.iter().copied().zip(degrees).collect(),
+                ));
             }
-            panels.push(panel);
+            panels.push(magnitude);
+            phases.push(phase);
         }
+        panels.extend(phases);
     }
-    let columns = m.min(3);
-    Ok(Figure::grid(panels, columns))
+    Ok(Figure::grid(panels, m))
+}
+
+/// Phases in degrees along a frequency grid, unwrapped (no jump of more than 180
+/// degrees between neighbours); NaN where the response does not exist.
+fn unwrapped_degrees(response: &[Option<nalgebra::Complex<f64>>]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(response.len());
+    let mut previous: Option<f64> = None;
+    for g in response {
+        let Some(g) = g else {
+            out.push(f64::NAN);
+            continue;
+        };
+        let mut angle = g.arg().to_degrees();
+        if let Some(prev) = previous {
+            angle += 360.0 * ((prev - angle) / 360.0).round();
+        }
+        previous = Some(angle);
+        out.push(angle);
+    }
+    out
 }
 
 fn stem(path: &Path) -> String {
@@ -331,4 +358,24 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         },
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod phase_tests {
+    use super::unwrapped_degrees;
+    use nalgebra::Complex;
+
+    /// A delay of three samples, `z^-3`: its phase is `-3 omega` in radians, a straight
+    /// line through -180 and -360 degrees without jumps.
+    #[test]
+    fn a_delay_has_a_straight_unwrapped_phase() {
+        let grid: Vec<f64> = (0..200).map(|k| std::f64::consts::PI * k as f64 / 200.0).collect();
+        let response: Vec<Option<Complex<f64>>> =
+            grid.iter().map(|&w| Some(Complex::from_polar(1.0, -3.0 * w))).collect();
+        let phase = unwrapped_degrees(&response);
+        for (w, p) in grid.iter().zip(&phase) {
+            assert!((p - (-3.0 * w).to_degrees()).abs() < 1e-9, "omega {w}: {p}");
+        }
+        assert!(unwrapped_degrees(&[None, Some(Complex::new(1.0, 0.0))])[0].is_nan());
+    }
 }

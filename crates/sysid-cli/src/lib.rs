@@ -160,6 +160,12 @@ enum Command {
         after_help = "Examples:\n  sysid forecast --model fit.json --data d.csv --steps 12 --out forecast.csv\n  sysid forecast --model fit.json --data d.csv --steps 50 --future-inputs u_next.csv --level 0.9 --out forecast.csv"
     )]
     Forecast(commands::forecast::Options),
+    /// Transfer functions of a model: poles, and per channel the zeros, the static
+    /// gain and the numerator and denominator polynomials in z.
+    #[command(
+        after_help = "Examples:\n  sysid tf --model fit.json\n  sysid tf --model fit.json --json"
+    )]
+    Tf(commands::tf::Options),
     /// Residual tests of a model on a record: autocorrelation of the one-step errors,
     /// cross-correlation with the inputs, Ljung-Box statistic and p-value, a figure.
     #[command(
@@ -262,6 +268,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Predict(options)) => commands::predict::run(&options),
         Some(Command::Compare(options)) => commands::compare::run(&options),
         Some(Command::Resid(options)) => commands::resid::run(&options),
+        Some(Command::Tf(options)) => commands::tf::run(&options),
         Some(Command::Forecast(options)) => commands::forecast::run(&options),
         Some(Command::Pf(options)) => commands::particle::run_filter(&options),
         Some(Command::Psmooth(options)) => commands::particle::run_smoother(&options),

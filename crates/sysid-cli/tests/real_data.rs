@@ -1405,3 +1405,85 @@ fn range_picks_estimation_and_validation_rows_of_one_file() {
     ]);
     assert_one_line_error(&bad, &["--range", "700 to 900", "1 to 801"]);
 }
+
+/// `tf` against scipy 1.17.1's `signal.ss2tf` (numerator and denominator polynomials,
+/// zeros by `np.roots`) and the static gain `C (I - A)^{-1} B + D`, on a three-state
+/// model with two inputs and two outputs (a zero at -19.4 and a complex pair among the
+/// channels).
+#[test]
+fn tf_matches_scipy() {
+    let dir = scratch_dir();
+    let path = dir.join("m.json");
+    std::fs::write(
+        &path,
+        r#"{"a":[[0.9,0.2,0.0],[-0.1,0.7,0.3],[0.0,0.0,0.5]],"b":[[1.0,0.0],[0.5,1.0],[0.0,2.0]],"c":[[1.0,0.0,1.0],[0.0,1.0,-1.0]],"d":[[0.0,0.1],[0.2,0.0]],"q":[[1,0,0],[0,1,0],[0,0,1]],"r":[[1,0],[0,1]]}"#,
+    )
+    .unwrap();
+    let result = summary(&sysid(&["tf", "--model", s(&path), "--json"]));
+    let den = [1.0, -2.1, 1.45, -0.325];
+    // (output, input): numerator from the highest power, zeros (re, im), gain
+    type Channel<'a> = (&'a [f64], &'a [(f64, f64)], f64);
+    let channels: [Channel; 4] = [
+        (&[1.0, -1.1, 0.3], &[(0.5, 0.0), (0.6, 0.0)], 8.0),
+        (
+            &[0.1, 1.79, -2.855, 1.2875],
+            &[
+                (-19.405427975873, 0.0),
+                (0.752713987937, -0.311280919811),
+                (0.752713987937, 0.311280919811),
+            ],
+            12.9,
+        ),
+        (
+            &[0.2, 0.08, -0.51, 0.21],
+            &[(-1.967399090549, 0.0), (0.5, 0.0), (1.067399090549, 0.0)],
+            -0.8,
+        ),
+        (
+            &[-1.0, 2.4, -1.39],
+            &[(0.97639320225, 0.0), (1.42360679775, 0.0)],
+            0.4,
+        ),
+    ];
+    for (k, (num, zeros, gain)) in channels.iter().enumerate() {
+        let c = &result["channels"][k];
+        let close = |got: &serde_json::Value, want: f64, what: &str| {
+            let got = got.as_f64().unwrap();
+            assert!(
+                (got - want).abs() < 1e-9 * want.abs().max(1.0),
+                "channel {k} {what}: {got} vs {want}"
+            );
+        };
+        close(&c["gain"], *gain, "gain");
+        for (q, &want) in num.iter().enumerate() {
+            close(&c["numerator"][q], want, "numerator");
+        }
+        for (q, &want) in den.iter().enumerate() {
+            close(&c["denominator"][q], want, "denominator");
+        }
+        let mut got: Vec<(f64, f64)> = c["zeros"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|z| (z[0].as_f64().unwrap(), z[1].as_f64().unwrap()))
+            .collect();
+        got.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        assert_eq!(got.len(), zeros.len(), "channel {k}: {got:?}");
+        for (g, w) in got.iter().zip(zeros.iter()) {
+            assert!(
+                (g.0 - w.0).abs() < 1e-8 && (g.1 - w.1).abs() < 1e-8,
+                "channel {k}: {got:?}"
+            );
+        }
+    }
+    let no_inputs = dir.join("ts.json");
+    std::fs::write(
+        &no_inputs,
+        r#"{"a":[[0.5]],"c":[[1.0]],"q":[[1.0]],"r":[[1.0]]}"#,
+    )
+    .unwrap();
+    assert_one_line_error(
+        &sysid(&["tf", "--model", s(&no_inputs)]),
+        &["no inputs", "poles (0.5"],
+    );
+}

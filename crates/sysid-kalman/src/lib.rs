@@ -68,6 +68,7 @@ mod stats;
 pub use data::Record;
 pub use error::{KalmanError, Result};
 pub use filter::{FilterOutput, KalmanWorkspace};
+pub use frequency::TransferFunction;
 pub use initial::{InitialState, spectral_radius, stationary_covariance};
 pub use model::{LinearGaussianModel, ModelBuilder};
 pub use predict::{Forecast, Predictions};

@@ -18,6 +18,7 @@ pub mod resid;
 pub mod simulate;
 pub mod simulate_model;
 pub mod smooth;
+pub mod tf;
 
 use crate::DataArgs;
 use crate::error::CliError;

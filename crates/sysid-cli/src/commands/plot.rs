@@ -369,9 +369,13 @@ mod phase_tests {
     /// line through -180 and -360 degrees without jumps.
     #[test]
     fn a_delay_has_a_straight_unwrapped_phase() {
-        let grid: Vec<f64> = (0..200).map(|k| std::f64::consts::PI * k as f64 / 200.0).collect();
-        let response: Vec<Option<Complex<f64>>> =
-            grid.iter().map(|&w| Some(Complex::from_polar(1.0, -3.0 * w))).collect();
+        let grid: Vec<f64> = (0..200)
+            .map(|k| std::f64::consts::PI * k as f64 / 200.0)
+            .collect();
+        let response: Vec<Option<Complex<f64>>> = grid
+            .iter()
+            .map(|&w| Some(Complex::from_polar(1.0, -3.0 * w)))
+            .collect();
         let phase = unwrapped_degrees(&response);
         for (w, p) in grid.iter().zip(&phase) {
             assert!((p - (-3.0 * w).to_degrees()).abs() < 1e-9, "omega {w}: {p}");

@@ -126,6 +126,7 @@ pub fn metadata_of(file: &DataFile, path: &Path) -> Metadata {
         command: Some(command.join(" ")),
         data: Some(path.display().to_string()),
         data_fingerprint: Some(fingerprint(&file.record)),
+        sample_time: file.sample_time,
         ..Metadata::default()
     }
 }
@@ -145,7 +146,59 @@ pub struct DataFile {
     pub record: Record,
     pub input_names: Vec<String>,
     pub output_names: Vec<String>,
+    /// The time column's values (a column named `t`, `time` or `date`), or the row
+    /// numbers 1..T when it has none or its entries are not numbers.
     pub time: Vec<f64>,
+    /// The time column's entries as written (`1959Q1`, `2001-03`, `0.5`), carried to
+    /// the outputs; the row numbers when there is no time column.
+    pub labels: Vec<String>,
+    /// The sampling interval read from a numeric, evenly spaced time column.
+    pub sample_time: Option<f64>,
+}
+
+impl DataFile {
+    /// Row `t`'s time as written in the file, as a CSV field (quoted if it holds a
+    /// comma or a quote).
+    pub fn label(&self, t: usize) -> String {
+        let label = &self.labels[t];
+        if label.contains([',', '"', ';', '\t']) {
+            format!("\"{}\"", label.replace('"', "\"\""))
+        } else {
+            label.clone()
+        }
+    }
+}
+
+/// The delimiter of a CSV file: the most frequent of comma, semicolon and tab in its
+/// first line (outside double quotes); a comma when none occurs.
+fn sniff_delimiter(first_line: &str) -> u8 {
+    let mut counts = [(b',', 0usize), (b';', 0), (b'\t', 0)];
+    let mut quoted = false;
+    for c in first_line.bytes() {
+        if c == b'"' {
+            quoted = !quoted;
+        } else if !quoted {
+            for (d, n) in counts.iter_mut() {
+                if c == *d {
+                    *n += 1;
+                }
+            }
+        }
+    }
+    counts
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .max_by_key(|(_, n)| *n)
+        .map_or(b',', |(d, _)| *d)
+}
+
+/// The sampling interval of evenly spaced times (to 1e-6 relative), if positive.
+fn even_spacing(time: &[f64]) -> Option<f64> {
+    let dt = time.get(1)? - time[0];
+    let even = time
+        .windows(2)
+        .all(|w| ((w[1] - w[0]) - dt).abs() <= 1e-6 * dt.abs().max(f64::MIN_POSITIVE));
+    (dt > 0.0 && even).then_some(dt)
 }
 
 fn is_missing(field: &str) -> bool {
@@ -200,11 +253,21 @@ pub fn parse_rows(
     file: impl std::io::Read,
     path: &Path,
 ) -> Result<(Vec<String>, Vec<NumberedRow>), CliError> {
+    let mut bytes = Vec::new();
+    let mut file = file;
+    file.read_to_end(&mut bytes)
+        .map_err(|source| CliError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let first_line = bytes.split(|&b| b == b'\n').next().unwrap_or(&[]);
+    let delimiter = sniff_delimiter(&String::from_utf8_lossy(first_line));
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
+        .delimiter(delimiter)
         .trim(csv::Trim::All)
-        .from_reader(file);
+        .from_reader(bytes.as_slice());
     let csv_err = |e: csv::Error| CliError::Csv {
         path: path.to_path_buf(),
         message: e.to_string(),
@@ -307,8 +370,10 @@ pub fn parse_data(
     let (header, rows) = parse_rows(reader, path)?;
     let input_cols = select(path, &header, &choice.inputs, 'u')?;
     let output_cols = select(path, &header, &choice.outputs, 'y')?;
-    let time_col = header.iter().position(|h| h == "t");
-    let (mut u, mut y, mut time) = (Vec::new(), Vec::new(), Vec::new());
+    let time_col = header
+        .iter()
+        .position(|h| matches!(h.to_ascii_lowercase().as_str(), "t" | "time" | "date"));
+    let (mut u, mut y, mut labels) = (Vec::new(), Vec::new(), Vec::new());
     for (line, row) in rows {
         let number =
             |col: usize, role: &'static str, allow_missing: bool| -> Result<f64, CliError> {
@@ -340,7 +405,7 @@ pub fn parse_data(
             y.push(number(c, "output", true)?);
         }
         if let Some(c) = time_col {
-            time.push(number(c, "time", false)?);
+            labels.push(row[c].to_string());
         }
     }
     let steps = if output_cols.is_empty() {
@@ -353,11 +418,26 @@ pub fn parse_data(
             path: path.to_path_buf(),
         });
     }
-    if time.is_empty() {
-        time = (1..=steps).map(|t| t as f64).collect();
+    // a numeric time column gives the times (and perhaps the sample time); any other is
+    // kept as labels, with the row numbers as times
+    let numeric: Option<Vec<f64>> = labels
+        .iter()
+        .map(|l| l.parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect();
+    let (time, sample_time) = match numeric.filter(|v| !v.is_empty()) {
+        Some(values) => {
+            let dt = even_spacing(&values);
+            (values, dt)
+        }
+        None => ((1..=steps).map(|t| t as f64).collect(), None),
+    };
+    if labels.is_empty() {
+        labels = (1..=steps).map(|t| t.to_string()).collect();
     }
     let name = |cols: &[usize]| cols.iter().map(|&c| header[c].clone()).collect();
     Ok(DataFile {
+        labels,
+        sample_time,
         record: Record::new(
             DMatrix::from_vec(input_cols.len(), steps, u),
             DMatrix::from_vec(output_cols.len(), steps, y),

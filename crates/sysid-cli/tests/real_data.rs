@@ -1336,6 +1336,13 @@ fn detrend_mean_gives_a_model_of_the_original_signals() {
     }
     let meta = &model(&detrended)["metadata"]["detrend"];
     assert_eq!(meta["kind"], "mean");
+    // the record's time column (0, 2, 4, ... s) gives the sample time, and the Bode
+    // plot's frequencies are per unit of it
+    assert_eq!(model(&detrended)["metadata"]["sample_time"], 2.0);
+    let figures = dir.join("figures");
+    assert_ok(&sysid(&["plot", s(&detrended), "--out-dir", s(&figures)]));
+    let svg = std::fs::read_to_string(figures.join("bode.svg")).unwrap();
+    assert!(svg.contains("rad per time unit"), "the Bode axis");
     assert!((meta["outputs"][0].as_f64().unwrap() - my).abs() < 1e-9 * my.abs());
     let bad = sysid(&[
         "fit",
@@ -1486,4 +1493,96 @@ fn tf_matches_scipy() {
         &sysid(&["tf", "--model", s(&no_inputs)]),
         &["no inputs", "poles (0.5"],
     );
+}
+
+/// A semicolon- or tab-separated file reads as a comma-separated one; a time column
+/// of labels (`1871Q1`) is carried to the outputs; a numeric, evenly spaced one gives
+/// the sample time, stored in the model and used by the Bode plot's axis.
+#[test]
+fn delimiters_time_labels_and_the_sample_time() {
+    let dir = scratch_dir();
+    let text = std::fs::read_to_string(data("nile.csv")).unwrap();
+    let rows: Vec<(&str, &str)> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split_once(',').unwrap())
+        .collect();
+    let write = |name: &str, sep: &str, label: &dyn Fn(usize) -> String| {
+        let path = dir.join(name);
+        let body: Vec<String> = rows
+            .iter()
+            .enumerate()
+            .map(|(k, (_, y))| format!("{}{sep}{y}", label(k)))
+            .collect();
+        std::fs::write(&path, format!("time{sep}flow\n{}\n", body.join("\n"))).unwrap();
+        path
+    };
+    let model = dir.join("nile.json");
+    std::fs::write(
+        &model,
+        r#"{"a":[[1.0]],"c":[[1.0]],"q":[[1469.1]],"r":[[15099.0]],"initial":"diffuse"}"#,
+    )
+    .unwrap();
+    let loglik = |data: &PathBuf| {
+        summary(&sysid(&[
+            "loglik",
+            "--model",
+            s(&model),
+            "--data",
+            s(data),
+            "--outputs",
+            "flow",
+            "--json",
+        ]))["loglik"]
+            .as_f64()
+            .unwrap()
+    };
+    let quarter = |k: usize| format!("{}Q{}", 1871 + k / 4, k % 4 + 1);
+    let semicolon = write("semicolon.csv", ";", &quarter);
+    let tab = write("tab.csv", "\t", &|k| (k + 1).to_string());
+    let comma = write("comma.csv", ",", &|k| (2 * k).to_string());
+    let want = loglik(&comma);
+    assert_eq!(loglik(&semicolon), want);
+    assert_eq!(loglik(&tab), want);
+    // labels are carried to the predictions
+    let out = dir.join("pred.csv");
+    assert_ok(&sysid(&[
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&semicolon),
+        "--outputs",
+        "flow",
+        "--out",
+        s(&out),
+    ]));
+    let written = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        written.lines().nth(1).unwrap().starts_with("1871Q1,"),
+        "{written}"
+    );
+    assert!(
+        written.lines().nth(6).unwrap().starts_with("1872Q2,"),
+        "{written}"
+    );
+    // an evenly spaced numeric time column: the sample time (2 here) is stored
+    let fitted = dir.join("fit.json");
+    assert_ok(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&comma),
+        "--outputs",
+        "flow",
+        "--init",
+        s(&model),
+        "--fix",
+        "A",
+        "--fix",
+        "C",
+        "--out",
+        s(&fitted),
+    ]));
+    assert_eq!(self::model(&fitted)["metadata"]["sample_time"], 2.0);
 }

@@ -874,6 +874,8 @@ mod tests {
             input_names: (1..=u.nrows()).map(|i| format!("u{i}")).collect(),
             output_names: (1..=y.nrows()).map(|i| format!("y{i}")).collect(),
             time: (0..y.ncols()).map(|t| t as f64).collect(),
+            labels: (0..y.ncols()).map(|t| t.to_string()).collect(),
+            sample_time: None,
             record: Record::new(u, y),
         }
     }

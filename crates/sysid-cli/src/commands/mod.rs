@@ -84,6 +84,7 @@ fn rows(mut file: DataFile, range: &str) -> Result<DataFile, CliError> {
         file.record.y.columns(from, len).clone_owned(),
     );
     file.time = file.time[from..from + len].to_vec();
+    file.labels = file.labels[from..from + len].to_vec();
     Ok(file)
 }
 

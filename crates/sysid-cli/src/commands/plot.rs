@@ -11,7 +11,7 @@
 //! `<out-dir>/bode.svg` and `.png`.
 
 use crate::error::CliError;
-use crate::files::{read_columns, read_model};
+use crate::files::read_columns;
 use std::path::{Path, PathBuf};
 use sysid::kalman::LinearGaussianModel;
 use sysid_plot::{Band, Figure, Panel, Scale, Series, Stroke};
@@ -226,7 +226,14 @@ fn data_figure(path: &Path) -> Result<Figure, CliError> {
 }
 
 /// Bode magnitudes of every channel, one curve per model.
-fn bode_figure(models: &[(String, LinearGaussianModel)]) -> Result<Figure, CliError> {
+fn bode_figure(
+    models: &[(String, LinearGaussianModel)],
+    sample_time: Option<f64>,
+) -> Result<Figure, CliError> {
+    let (x_label, per) = match sample_time {
+        Some(ts) => ("frequency (rad per time unit)", ts),
+        None => ("frequency (rad/sample)", 1.0),
+    };
     let (p, m) = (models[0].1.p(), models[0].1.m());
     for (name, model) in models {
         if model.p() != p || model.m() != m {
@@ -254,16 +261,13 @@ fn bode_figure(models: &[(String, LinearGaussianModel)]) -> Result<Figure, CliEr
         for j in 0..m {
             let mut magnitude = Panel::new(
                 format!("{}: magnitude", channel(j)),
-                "frequency (rad/sample)",
+                x_label,
                 "magnitude (dB)",
             )
             .scales(Scale::Log, Scale::Linear);
-            let mut phase = Panel::new(
-                format!("{}: phase", channel(j)),
-                "frequency (rad/sample)",
-                "phase (degrees)",
-            )
-            .scales(Scale::Log, Scale::Linear);
+            let mut phase =
+                Panel::new(format!("{}: phase", channel(j)), x_label, "phase (degrees)")
+                    .scales(Scale::Log, Scale::Linear);
             for (name, model) in models {
                 let response: Vec<Option<nalgebra::Complex<f64>>> = grid
                     .iter()
@@ -272,13 +276,13 @@ fn bode_figure(models: &[(String, LinearGaussianModel)]) -> Result<Figure, CliEr
                 let db = grid
                     .iter()
                     .zip(&response)
-                    .map(|(&w, g)| (w, g.map_or(f64::NAN, |g| 20.0 * g.norm().log10())))
+                    .map(|(&w, g)| (w / per, g.map_or(f64::NAN, |g| 20.0 * g.norm().log10())))
                     .collect();
                 magnitude = magnitude.with_series(Series::line(name.clone(), db));
                 let degrees = unwrapped_degrees(&response);
                 phase = phase.with_series(Series::line(
                     name.clone(),
-                    grid.iter().copied().zip(degrees).collect(),
+                    grid.iter().map(|w| w / per).zip(degrees).collect(),
                 ));
             }
             panels.push(magnitude);
@@ -317,9 +321,14 @@ fn stem(path: &Path) -> String {
 pub fn run(o: &Options) -> Result<(), CliError> {
     let mut jobs: Vec<(String, Figure)> = Vec::new();
     let mut models = Vec::new();
+    let mut sample_times = Vec::new();
     for path in &o.files {
         match kind_of(path, &o.kind)? {
-            Kind::Bode => models.push((stem(path), read_model(path)?)),
+            Kind::Bode => {
+                let file = crate::files::read_model_file(path)?;
+                sample_times.push(file.metadata.and_then(|m| m.sample_time));
+                models.push((stem(path), file.model));
+            }
             kind => {
                 let figure = match kind {
                     Kind::Trace => trace_figure(path)?,
@@ -331,7 +340,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         }
     }
     if !models.is_empty() {
-        jobs.push(("bode".into(), bode_figure(&models)?));
+        // frequencies per unit of the data's time when every model has the same
+        // sample time, else per sample
+        let sample_time = sample_times
+            .first()
+            .copied()
+            .flatten()
+            .filter(|ts| sample_times.iter().all(|s| *s == Some(*ts)));
+        jobs.push(("bode".into(), bode_figure(&models, sample_time)?));
     }
     let targets: Vec<PathBuf> = jobs
         .iter()

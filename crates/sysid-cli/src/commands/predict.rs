@@ -62,7 +62,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     }
     writeln!(w, "{}", header.join(",")).map_err(io)?;
     for t in 0..file.record.len() {
-        let mut row = vec![fmt(file.time[t])];
+        let mut row = vec![file.label(t)];
         for i in 0..model.p() {
             for v in [
                 pred.mean[(i, t)],

@@ -101,7 +101,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     header.extend(names.iter().cloned());
     writeln!(w, "{}", header.join(",")).map_err(io)?;
     for t in 0..record.len() {
-        let mut row = vec![fmt(file.time[t])];
+        let mut row = vec![file.label(t)];
         row.extend(record.u.column(t).iter().map(|&v| fmt(v)));
         row.extend(outputs.column(t).iter().map(|&v| fmt(v)));
         writeln!(w, "{}", row.join(",")).map_err(io)?;

@@ -81,7 +81,7 @@ pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
     header.extend((1..=n).map(|i| format!("x{i}_sd")));
     writeln!(w, "{}", header.join(",")).map_err(io)?;
     for (k, (mean, sd)) in rows.iter().enumerate() {
-        let mut row = vec![fmt(file.time[k])];
+        let mut row = vec![file.label(k)];
         row.extend(mean.iter().chain(sd).map(|&v| fmt(v)));
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }

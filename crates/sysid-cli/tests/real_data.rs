@@ -1586,3 +1586,67 @@ fn delimiters_time_labels_and_the_sample_time() {
     ]));
     assert_eq!(self::model(&fitted)["metadata"]["sample_time"], 2.0);
 }
+
+/// `fit lti --split 0.5` fits on the first half and reports the written model's fits
+/// on the second, the figures `compare` gives on those rows.
+#[test]
+fn split_reports_the_validation_fit_that_compare_gives() {
+    let dir = scratch_dir();
+    let raw = data("heating_system.csv");
+    let out = dir.join("split.json");
+    let result = summary(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&raw),
+        "--order",
+        "3",
+        "--detrend",
+        "mean",
+        "--max-iter",
+        "60",
+        "--split",
+        "0.5",
+        "--out",
+        s(&out),
+        "--json",
+    ]));
+    let validation = &result["validation"];
+    assert_eq!(validation["rows"], 401);
+    for (key, horizon) in [
+        ("simulation_fit_percent", "inf"),
+        ("prediction_fit_percent", "1"),
+    ] {
+        let compared = summary(&sysid(&[
+            "compare",
+            "--model",
+            s(&out),
+            "--data",
+            s(&raw),
+            "--range",
+            "401:",
+            "--horizon",
+            horizon,
+            "--json",
+        ]));
+        let want = compared["models"][0]["fit_percent"][0].as_f64().unwrap();
+        let got = validation[key].as_f64().unwrap();
+        assert!(
+            (got - want).abs() < 1e-9,
+            "{key}: {got} vs compare's {want}"
+        );
+    }
+    let bad = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&raw),
+        "--order",
+        "2",
+        "--split",
+        "1.5",
+        "--out",
+        s(&dir.join("x.json")),
+    ]);
+    assert_one_line_error(&bad, &["--split", "strictly between 0 and 1"]);
+}

@@ -118,6 +118,11 @@ pub struct Options {
     /// simulates the original signals; `none` (the default) fits them as they are.
     #[arg(long, default_value = "none")]
     pub detrend: String,
+    /// Linear EM: fit on the first FRACTION of the rows (after --range) and report the
+    /// fitted model's simulation and one-step prediction fits on the rest (as `sysid
+    /// compare` computes them).
+    #[arg(long)]
+    pub split: Option<f64>,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
     #[arg(long, visible_alias = "iters", default_value_t = 500)]
@@ -270,6 +275,25 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         message: e.to_string(),
     })?;
     let mut file = o.data.read()?;
+    let validation = match o.split {
+        None => None,
+        Some(fraction) => {
+            let total = file.record.len();
+            let cut = (fraction * total as f64).floor() as usize;
+            if !(fraction > 0.0 && fraction < 1.0) || cut < 2 || cut + 2 > total {
+                return Err(CliError::BadOption {
+                    option: "--split",
+                    message: format!(
+                        "{fraction} leaves no useful estimation or validation rows of {total} \
+                         (give a fraction strictly between 0 and 1)"
+                    ),
+                });
+            }
+            let rest = super::rows(file.clone(), &format!("{}:", cut + 1))?;
+            file = super::rows(file, &format!("1:{cut}"))?;
+            Some(rest)
+        }
+    };
     let means = super::detrend::parse(&o.detrend)?.then(|| super::detrend::centre(&mut file));
     non_negative("--min-variance", o.min_variance)?;
     non_negative("--min-output-noise", o.min_output_noise)?;
@@ -491,6 +515,31 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     crate::files::write_model(&o.out, o.force, &spec_out)?;
+    // the written model (original units, a new record's initial state) on the rows
+    // held out by --split
+    let validation_fit = match &validation {
+        None => serde_json::Value::Null,
+        Some(rest) => {
+            let model = written
+                .apply_to_record(&described, &rest.record)
+                .map_err(|source| CliError::Kalman {
+                    context: "--split".into(),
+                    source,
+                })?;
+            let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+            let simulation = model
+                .response(&rest.record, None)
+                .map(|r| mean(sysid::kalman::fit_percent(&rest.record.y, &r.outputs, 0)));
+            let prediction = model
+                .predict(&rest.record, 1)
+                .map(|p| mean(sysid::kalman::fit_percent(&rest.record.y, &p.mean, 0)));
+            serde_json::json!({
+                "rows": rest.record.len(),
+                "simulation_fit_percent": simulation.ok(),
+                "prediction_fit_percent": prediction.ok(),
+            })
+        }
+    };
     if let Some(path) = &o.trace {
         let mut text = String::from("iteration,loglik\n");
         for (k, l) in result.trace.iter().enumerate() {
@@ -549,6 +598,19 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             }
             None => (serde_json::Value::Null, String::new()),
         };
+    let validation_text = match &validation_fit {
+        serde_json::Value::Null => String::new(),
+        v => format!(
+            "\nvalidation ({} rows held out): simulation fit {} %, one-step prediction fit {} %",
+            v["rows"],
+            v["simulation_fit_percent"]
+                .as_f64()
+                .map_or("-".into(), |f| format!("{f:.2}")),
+            v["prediction_fit_percent"]
+                .as_f64()
+                .map_or("-".into(), |f| format!("{f:.2}")),
+        ),
+    };
     crate::report(
         o.json,
         serde_json::json!({
@@ -562,6 +624,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             })),
             "termination": stop, "em_termination": em_stop(&result.termination),
             "seconds": started.elapsed().as_secs_f64(), "out": o.out, "warnings": warnings,
+            "validation": validation_fit,
         }),
         || {
             let polish_text = polish
@@ -576,7 +639,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 .unwrap_or_default();
             format!(
                 "loglik {loglik} after {} EM iterations ({e_steps} E-steps, {}){polish_text}; \
-                 {stop} in {:.2} s; wrote {}{table}",
+                 {stop} in {:.2} s; wrote {}{validation_text}{table}",
                 result.iterations,
                 em_stop(&result.termination),
                 started.elapsed().as_secs_f64(),

@@ -55,7 +55,7 @@ impl DataArgs {
 }
 
 /// The rows `START..=END` (1-based) of a data file, from `--range START:END`.
-fn rows(mut file: DataFile, range: &str) -> Result<DataFile, CliError> {
+pub fn rows(mut file: DataFile, range: &str) -> Result<DataFile, CliError> {
     let total = file.record.len();
     let bad = |message: String| CliError::BadOption {
         option: "--range",

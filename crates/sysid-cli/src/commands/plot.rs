@@ -22,7 +22,8 @@ pub struct Options {
     /// Files written by sysid: EM traces, models (JSON), states, data (CSV).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// What the files are: auto (from their content), trace, bode, states or data.
+    /// What the files are: auto (from their content), trace, bode, states or data; for
+    /// model files also step or impulse (their responses from rest, per channel).
     #[arg(long, default_value = "auto")]
     pub kind: String,
     /// States: a data file with the true states (columns x1, x2, ...; `simulate`
@@ -44,6 +45,8 @@ pub struct Options {
 enum Kind {
     Trace,
     Bode,
+    Step,
+    Impulse,
     States,
     Data,
 }
@@ -53,6 +56,8 @@ impl Kind {
         match self {
             Kind::Trace => "trace",
             Kind::Bode => "bode",
+            Kind::Step => "step",
+            Kind::Impulse => "impulse",
             Kind::States => "states",
             Kind::Data => "data",
         }
@@ -71,6 +76,8 @@ fn kind_of(path: &Path, requested: &str) -> Result<Kind, CliError> {
     let kind = match requested {
         "trace" => Kind::Trace,
         "bode" => Kind::Bode,
+        "step" => Kind::Step,
+        "impulse" => Kind::Impulse,
         "states" => Kind::States,
         "data" => Kind::Data,
         "auto" => {
@@ -96,7 +103,9 @@ fn kind_of(path: &Path, requested: &str) -> Result<Kind, CliError> {
         other => {
             return Err(CliError::BadOption {
                 option: "--kind",
-                message: format!("unknown kind {other:?} (known: auto, trace, bode, states, data)"),
+                message: format!(
+                    "unknown kind {other:?} (known: auto, trace, bode, step, impulse, states, data)"
+                ),
             });
         }
     };
@@ -293,6 +302,72 @@ fn bode_figure(
     Ok(Figure::grid(panels, m))
 }
 
+/// Step (`step`) or impulse responses from rest of every channel, one curve per model,
+/// over the time the slowest stable pole takes to decay to 1e-3 (20 to 1000 samples;
+/// 100 with an unstable model).
+fn response_figure(
+    models: &[(String, LinearGaussianModel)],
+    step: bool,
+    sample_time: Option<f64>,
+) -> Result<Figure, CliError> {
+    let (p, m) = (models[0].1.p(), models[0].1.m());
+    if m == 0
+        || models
+            .iter()
+            .any(|(_, model)| model.p() != p || model.m() != m)
+    {
+        return Err(bad(
+            "step and impulse responses need models with the same inputs and outputs (and at \
+             least one input)"
+                .into(),
+        ));
+    }
+    let steps = models
+        .iter()
+        .map(|(_, model)| {
+            let radius = sysid::kalman::spectral_radius(model.a());
+            if radius >= 1.0 {
+                100
+            } else if radius <= 0.0 {
+                20
+            } else {
+                ((1e-3f64).ln() / radius.ln()).ceil() as usize
+            }
+        })
+        .max()
+        .unwrap_or(100)
+        .clamp(20, 1000);
+    let ts = sample_time.unwrap_or(1.0);
+    let what = if step { "step" } else { "impulse" };
+    let mut panels = Vec::new();
+    for i in 0..p {
+        for j in 0..m {
+            let mut panel = Panel::new(
+                format!("{what} response, u{} to y{}", j + 1, i + 1),
+                if sample_time.is_some() {
+                    "time"
+                } else {
+                    "samples"
+                },
+                format!("y{}", i + 1),
+            );
+            for (name, model) in models {
+                let mut x = nalgebra::DVector::zeros(model.n());
+                let mut points = Vec::with_capacity(steps);
+                for k in 0..steps {
+                    let u = if step || k == 0 { 1.0 } else { 0.0 };
+                    let y = (model.c() * &x)[i] + model.d()[(i, j)] * u;
+                    points.push((k as f64 * ts, y));
+                    x = model.a() * x + model.b().column(j) * u;
+                }
+                panel = panel.with_series(Series::line(name.clone(), points));
+            }
+            panels.push(panel);
+        }
+    }
+    Ok(Figure::grid(panels, m))
+}
+
 /// Phases in degrees along a frequency grid, unwrapped (no jump of more than 180
 /// degrees between neighbours); NaN where the response does not exist.
 fn unwrapped_degrees(response: &[Option<nalgebra::Complex<f64>>]) -> Vec<f64> {
@@ -322,9 +397,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let mut jobs: Vec<(String, Figure)> = Vec::new();
     let mut models = Vec::new();
     let mut sample_times = Vec::new();
+    let mut model_kind = Kind::Bode;
     for path in &o.files {
         match kind_of(path, &o.kind)? {
-            Kind::Bode => {
+            kind @ (Kind::Bode | Kind::Step | Kind::Impulse) => {
+                model_kind = kind;
                 let file = crate::files::read_model_file(path)?;
                 sample_times.push(file.metadata.and_then(|m| m.sample_time));
                 models.push((stem(path), file.model));
@@ -347,7 +424,13 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             .copied()
             .flatten()
             .filter(|ts| sample_times.iter().all(|s| *s == Some(*ts)));
-        jobs.push(("bode".into(), bode_figure(&models, sample_time)?));
+        let figure = match model_kind {
+            Kind::Step | Kind::Impulse => {
+                response_figure(&models, model_kind == Kind::Step, sample_time)?
+            }
+            _ => bode_figure(&models, sample_time)?,
+        };
+        jobs.push((model_kind.name().into(), figure));
     }
     let targets: Vec<PathBuf> = jobs
         .iter()
@@ -397,5 +480,45 @@ mod phase_tests {
             assert!((p - (-3.0 * w).to_degrees()).abs() < 1e-9, "omega {w}: {p}");
         }
         assert!(unwrapped_degrees(&[None, Some(Complex::new(1.0, 0.0))])[0].is_nan());
+    }
+}
+
+#[cfg(test)]
+mod response_tests {
+    use super::response_figure;
+    use nalgebra::dmatrix;
+    use sysid::kalman::LinearGaussianModel;
+
+    /// x' = 0.5 x + u, y = x: the step response rises to the static gain 2 as
+    /// 2 (1 - 0.5^k), the impulse response is 0.5^(k-1) after a zero.
+    #[test]
+    fn a_first_order_system_responds_as_its_formula() {
+        let model = LinearGaussianModel::builder(
+            dmatrix![0.5],
+            dmatrix![1.0],
+            dmatrix![1.0],
+            dmatrix![1.0],
+        )
+        .b(dmatrix![1.0])
+        .build()
+        .unwrap();
+        let models = vec![("m".to_string(), model)];
+        let step = response_figure(&models, true, None).unwrap();
+        let points = &step.panels[0].series[0].points;
+        assert_eq!(
+            points.len(),
+            20,
+            "decays to 1e-3 in 10 samples, at least 20 drawn"
+        );
+        for &(k, y) in points {
+            assert!(
+                (y - 2.0 * (1.0 - 0.5f64.powf(k))).abs() < 1e-12,
+                "step at {k}: {y}"
+            );
+        }
+        let impulse = response_figure(&models, false, Some(2.0)).unwrap();
+        let points = &impulse.panels[0].series[0].points;
+        assert_eq!(points[0], (0.0, 0.0));
+        assert_eq!(points[3], (6.0, 0.25), "time in units of the sample time");
     }
 }

@@ -20,6 +20,17 @@ fn model(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// `sysid fit lti --data DATA ARGS --out (scratch)` fails as bad input naming `needles`,
+/// and writes nothing.
+fn assert_fit_refused(data: &std::path::Path, args: &[&str], needles: &[&str]) {
+    let out = scratch_dir().join("refused.json");
+    let mut all = vec!["fit", "lti", "--data", s(data)];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", s(&out)]);
+    assert_one_line_error(&sysid(&all), needles);
+    assert!(!out.exists());
+}
+
 /// A structural model's known parts: A, C and the initial state.
 const KNOWN_DYNAMICS: [&str; 8] = ["--fix", "A", "--fix", "C", "--fix", "mu", "--fix", "P1"];
 
@@ -1344,19 +1355,11 @@ fn detrend_mean_gives_a_model_of_the_original_signals() {
     let svg = std::fs::read_to_string(figures.join("bode.svg")).unwrap();
     assert!(svg.contains("rad per time unit"), "the Bode axis");
     assert!((meta["outputs"][0].as_f64().unwrap() - my).abs() < 1e-9 * my.abs());
-    let bad = sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&raw),
-        "--order",
-        "2",
-        "--detrend",
-        "linearly",
-        "--out",
-        s(&dir.join("x.json")),
-    ]);
-    assert_one_line_error(&bad, &["--detrend", "none, mean"]);
+    assert_fit_refused(
+        &raw,
+        &["--order", "2", "--detrend", "linearly"],
+        &["--detrend", "none, mean"],
+    );
 }
 
 /// `--range` picks rows of one file: fitting on rows 1-400 and comparing on 401- gives
@@ -1636,17 +1639,75 @@ fn split_reports_the_validation_fit_that_compare_gives() {
             "{key}: {got} vs compare's {want}"
         );
     }
-    let bad = sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&raw),
-        "--order",
-        "2",
-        "--split",
-        "1.5",
-        "--out",
-        s(&dir.join("x.json")),
-    ]);
-    assert_one_line_error(&bad, &["--split", "strictly between 0 and 1"]);
+    assert_fit_refused(
+        &raw,
+        &["--order", "2", "--split", "1.5"],
+        &["--split", "strictly between 0 and 1"],
+    );
+}
+
+/// `fit lti --order 1..6` fits every order and tabulates log-likelihood, identifiable
+/// parameters, AIC, BIC and (with --split) the validation fit; `--select` chooses the
+/// order written, and the table is in the summary.
+#[test]
+fn an_order_table_chooses_the_order_written() {
+    let dir = scratch_dir();
+    let raw = data("heating_system.csv");
+    let table_for = |select: &str| {
+        let out = dir.join(format!("{select}.json"));
+        let result = summary(&sysid(&[
+            "fit",
+            "lti",
+            "--data",
+            s(&raw),
+            "--order",
+            "1..6",
+            "--detrend",
+            "mean",
+            "--split",
+            "0.5",
+            "--max-iter",
+            "60",
+            "--select",
+            select,
+            "--out",
+            s(&out),
+            "--json",
+        ]));
+        (result, model(&out))
+    };
+    for (select, key, smallest) in [
+        ("bic", "bic", true),
+        ("aic", "aic", true),
+        ("validation", "validation_simulation_fit_percent", false),
+    ] {
+        let (result, written) = table_for(select);
+        let table = &result["order_table"];
+        let orders = table["orders"].as_array().unwrap();
+        assert_eq!(orders.len(), 6, "{table}");
+        let value = |r: &serde_json::Value| r[key].as_f64().unwrap();
+        let best = orders
+            .iter()
+            .min_by(|a, b| {
+                let (x, y) = (value(a), value(b));
+                if smallest {
+                    x.total_cmp(&y)
+                } else {
+                    y.total_cmp(&x)
+                }
+            })
+            .unwrap();
+        assert_eq!(table["chosen"], best["order"], "{select}: {table}");
+        assert_eq!(written["metadata"]["order"], best["order"], "{select}");
+        assert_eq!(
+            written["a"].as_array().unwrap().len() as u64,
+            best["order"].as_u64().unwrap()
+        );
+    }
+    assert_fit_refused(
+        &raw,
+        &["--order", "1..3", "--select", "validation"],
+        &["--select", "--split"],
+    );
+    assert_fit_refused(&raw, &["--order", "3..1"], &["--order", "3..1"]);
 }

@@ -22,7 +22,7 @@ use sysid::kalman::{InitialState, LinearGaussianModel, ModelSpec, stationary_cov
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
 /// Options of `sysid fit`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct Options {
     /// Model class: `lti` (linear Gaussian state space, exact EM), `nlbench` (the
     /// seed-000 benchmark, particle EM), `affine` (particle EM for an affine model:
@@ -31,7 +31,11 @@ pub struct Options {
     pub kind: String,
     #[command(flatten)]
     pub data: DataArgs,
-    /// Model order (required with `--init n4sid`; checked against a model file).
+    /// Model order (required with `--init n4sid`; checked against a model file), or
+    /// a range `FROM..TO` (linear EM): every order is fitted, a table of
+    /// log-likelihood, parameters, AIC, BIC and validation fit is printed, and the one
+    /// `--select` chooses is written. BIC and AIC count the identifiable parameters (a
+    /// black-box model's, less the n^2 of a change of state basis).
     #[arg(long)]
     pub order: Option<String>,
     /// Starting model: `n4sid` (subspace fit; its S is set to zero) or a model file.
@@ -123,6 +127,11 @@ pub struct Options {
     /// compare` computes them).
     #[arg(long)]
     pub split: Option<f64>,
+    /// Linear EM with `--order FROM..TO`: the criterion that chooses the order written,
+    /// `bic` (the default), `aic`, or `validation` (the best simulation fit on the rows
+    /// held out by --split).
+    #[arg(long, default_value = "bic", value_parser = ["bic", "aic", "validation"])]
+    pub select: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
     #[arg(long, visible_alias = "iters", default_value_t = 500)]
@@ -258,6 +267,129 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             });
         }
     }
+    if let Some((from, to)) = order_range(o.order.as_deref())? {
+        return order_table(o, from, to);
+    }
+    fit_lti(o, Mode::Write(None)).map(|_| ())
+}
+
+/// What [`fit_lti`] does with its result.
+enum Mode {
+    /// Write the model, the trace and the summary (with an order table, if any).
+    Write(Option<serde_json::Value>),
+    /// Only compute: a candidate of an order table.
+    Probe,
+}
+
+/// The figures of one fit, for an order table.
+struct Outcome {
+    order: usize,
+    loglik: Option<f64>,
+    parameters: usize,
+    observed: usize,
+    /// simulation fit on the rows held out by --split
+    validation: Option<f64>,
+}
+
+/// `--order FROM..TO`: the orders of a table, or `None` for one order (or `auto`).
+fn order_range(order: Option<&str>) -> Result<Option<(usize, usize)>, CliError> {
+    let Some((from, to)) = order.and_then(|o| o.split_once("..")) else {
+        return Ok(None);
+    };
+    let bad = || CliError::BadOption {
+        option: "--order",
+        message: format!("{from}..{to} is not a range of orders like 1..8"),
+    };
+    let (from, to) = (
+        from.trim().parse::<usize>().map_err(|_| bad())?,
+        to.trim().parse::<usize>().map_err(|_| bad())?,
+    );
+    if from == 0 || from > to || to > 20 {
+        return Err(bad());
+    }
+    Ok(Some((from, to)))
+}
+
+/// Fits every order `from..=to` (N4SID start, EM, same options; no polish), tabulates
+/// log-likelihood, parameters, AIC, BIC and the validation fit (with --split), and fits
+/// and writes the order `--select` chooses.
+fn order_table(o: &Options, from: usize, to: usize) -> Result<(), CliError> {
+    let select = o.select.as_str();
+    if select == "validation" && o.split.is_none() {
+        return Err(CliError::BadOption {
+            option: "--select",
+            message: "validation needs held-out rows: add --split FRACTION".into(),
+        });
+    }
+    let mut rows = Vec::new();
+    for n in from..=to {
+        let mut probe = o.clone();
+        probe.order = Some(n.to_string());
+        probe.polish = "off".into();
+        probe.std_errors = "off".into();
+        match fit_lti(&probe, Mode::Probe) {
+            Ok(outcome) => rows.push(outcome),
+            Err(e) => crate::warn(&format!("order {n} failed: {e}")),
+        }
+    }
+    let score = |r: &Outcome| -> f64 {
+        let k = r.parameters as f64;
+        match (select, r.loglik) {
+            ("validation", _) => -r.validation.unwrap_or(f64::NEG_INFINITY),
+            ("aic", Some(l)) => -2.0 * l + 2.0 * k,
+            (_, Some(l)) => -2.0 * l + k * (r.observed as f64).ln(),
+            _ => f64::INFINITY,
+        }
+    };
+    let best = rows
+        .iter()
+        .min_by(|a, b| score(a).total_cmp(&score(b)))
+        .ok_or_else(|| CliError::BadOption {
+            option: "--order",
+            message: format!("no order in {from}..{to} could be fitted"),
+        })?;
+    let table: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            let (l, k) = (r.loglik.unwrap_or(f64::NAN), r.parameters as f64);
+            serde_json::json!({
+                "order": r.order, "loglik": r.loglik, "parameters": r.parameters,
+                "aic": -2.0 * l + 2.0 * k, "bic": -2.0 * l + k * (r.observed as f64).ln(),
+                "validation_simulation_fit_percent": r.validation,
+            })
+        })
+        .collect();
+    if !o.json {
+        let mut text = format!(
+            "{:>5} {:>14} {:>6} {:>12} {:>12} {:>12}",
+            "order", "loglik", "k", "AIC", "BIC", "validation"
+        );
+        for (row, r) in table.iter().zip(&rows) {
+            text += &format!(
+                "\n{:>5} {:>14.4} {:>6} {:>12.2} {:>12.2} {:>12}{}",
+                r.order,
+                r.loglik.unwrap_or(f64::NAN),
+                r.parameters,
+                row["aic"].as_f64().unwrap_or(f64::NAN),
+                row["bic"].as_f64().unwrap_or(f64::NAN),
+                r.validation.map_or("-".into(), |v| format!("{v:.2} %")),
+                if r.order == best.order {
+                    "  <- chosen"
+                } else {
+                    ""
+                }
+            );
+        }
+        crate::say(&text);
+    }
+    let mut chosen = o.clone();
+    chosen.order = Some(best.order.to_string());
+    let table = serde_json::json!({"select": select, "chosen": best.order, "orders": table});
+    fit_lti(&chosen, Mode::Write(Some(table))).map(|_| ())
+}
+
+fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
+    let probe = matches!(mode, Mode::Probe);
     let fixes = o
         .fix
         .iter()
@@ -499,11 +631,18 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     };
     let mut spec_out = ModelSpec::with_initial(&described, written);
     let observed = file.record.y.iter().filter(|v| !v.is_nan()).count() as f64;
-    let k = coordinates as f64;
+    // a black-box model's entries have n^2 redundant directions (a change of state
+    // basis changes them, not the likelihood): the criteria count the others
+    let identifiable = if spec.a && spec.c {
+        coordinates.saturating_sub(result.estimate.n().pow(2))
+    } else {
+        coordinates
+    };
+    let k = identifiable as f64;
     spec_out.metadata = Some(sysid::kalman::Metadata {
         order: Some(result.estimate.n()),
         loglik: result.loglik,
-        parameters: Some(coordinates),
+        parameters: Some(identifiable),
         aic: result.loglik.map(|l| -2.0 * l + 2.0 * k),
         bic: result.loglik.map(|l| -2.0 * l + k * observed.ln()),
         termination: Some(stop.to_string()),
@@ -514,7 +653,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         }),
         ..crate::files::metadata_of(&file, &o.data.data)
     });
-    crate::files::write_model(&o.out, o.force, &spec_out)?;
+    if !probe {
+        crate::files::write_model(&o.out, o.force, &spec_out)?;
+    }
     // the written model (original units, a new record's initial state) on the rows
     // held out by --split
     let validation_fit = match &validation {
@@ -540,7 +681,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             })
         }
     };
-    if let Some(path) = &o.trace {
+    if let Some(path) = o.trace.as_ref().filter(|_| !probe) {
         let mut text = String::from("iteration,loglik\n");
         for (k, l) in result.trace.iter().enumerate() {
             text += &format!("{k},{l}\n");
@@ -611,10 +752,22 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 .map_or("-".into(), |f| format!("{f:.2}")),
         ),
     };
+    let outcome = Outcome {
+        order: result.estimate.n(),
+        loglik: result.loglik,
+        parameters: identifiable,
+        observed: file.record.y.iter().filter(|v| !v.is_nan()).count(),
+        validation: validation_fit["simulation_fit_percent"].as_f64(),
+    };
+    let order_table = match mode {
+        Mode::Probe => return Ok(outcome),
+        Mode::Write(table) => table,
+    };
     crate::report(
         o.json,
         serde_json::json!({
             "command": "fit", "loglik": result.loglik, "iterations": result.iterations,
+            "order_table": order_table,
             "parameters": parameters,
             "e_steps": e_steps, "accelerate": o.accelerate,
             "polish": polish.as_ref().map(|p| serde_json::json!({
@@ -662,7 +815,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             decrease_diagnosis(&result.estimate, &file, &spec)
         )));
     }
-    Ok(())
+    Ok(outcome)
 }
 
 /// The estimates as a table (statsmodels' summary): value, standard error, z, 95 %

@@ -62,6 +62,11 @@ pub(crate) struct DataArgs {
     /// of a file and validate on another.
     #[arg(long)]
     range: Option<String>,
+    /// The sampling interval, in the units of the data's time (default: the spacing of
+    /// an evenly spaced numeric time column); stored in fitted models, used by the
+    /// frequency and time axes of their plots.
+    #[arg(long)]
+    ts: Option<f64>,
 }
 
 /// A model file, data, and where the states go (`filter`, `smooth`).

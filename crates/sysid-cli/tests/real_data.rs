@@ -31,6 +31,15 @@ fn assert_fit_refused(data: &std::path::Path, args: &[&str], needles: &[&str]) {
     assert!(!out.exists());
 }
 
+/// The first output's fit that `sysid compare --model MODEL --data DATA ARGS` prints.
+fn compared_fit(model: &std::path::Path, data: &std::path::Path, args: &[&str]) -> f64 {
+    let mut all = vec!["compare", "--model", s(model), "--data", s(data), "--json"];
+    all.extend_from_slice(args);
+    summary(&sysid(&all))["models"][0]["fit_percent"][0]
+        .as_f64()
+        .unwrap()
+}
+
 /// A structural model's known parts: A, C and the initial state.
 const KNOWN_DYNAMICS: [&str; 8] = ["--fix", "A", "--fix", "C", "--fix", "mu", "--fix", "P1"];
 
@@ -1620,19 +1629,7 @@ fn split_reports_the_validation_fit_that_compare_gives() {
         ("simulation_fit_percent", "inf"),
         ("prediction_fit_percent", "1"),
     ] {
-        let compared = summary(&sysid(&[
-            "compare",
-            "--model",
-            s(&out),
-            "--data",
-            s(&raw),
-            "--range",
-            "401:",
-            "--horizon",
-            horizon,
-            "--json",
-        ]));
-        let want = compared["models"][0]["fit_percent"][0].as_f64().unwrap();
+        let want = compared_fit(&out, &raw, &["--range", "401:", "--horizon", horizon]);
         let got = validation[key].as_f64().unwrap();
         assert!(
             (got - want).abs() < 1e-9,
@@ -1710,4 +1707,45 @@ fn an_order_table_chooses_the_order_written() {
         &["--select", "--split"],
     );
     assert_fit_refused(&raw, &["--order", "3..1"], &["--order", "3..1"]);
+}
+
+/// `n4sid --detrend mean` writes a model of the original signals (N4SID centres them
+/// itself, so the fit is the plain one's); `--ts` sets the sample time stored.
+#[test]
+fn n4sid_detrend_and_an_explicit_sample_time() {
+    let dir = scratch_dir();
+    let raw = data("heating_system.csv");
+    let fit_of = |extra: &[&str], name: &str| {
+        let out = dir.join(name);
+        let mut args = vec![
+            "n4sid",
+            "--data",
+            s(&raw),
+            "--range",
+            ":400",
+            "--order",
+            "3",
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        assert_ok(&sysid(&args));
+        (compared_fit(&out, &raw, &["--range", "401:"]), model(&out))
+    };
+    let (plain, _) = fit_of(&[], "plain.json");
+    let (detrended, file) = fit_of(&["--detrend", "mean", "--ts", "0.5"], "detrended.json");
+    assert!((plain - detrended).abs() < 1e-6, "{plain} vs {detrended}");
+    assert_eq!(file["metadata"]["detrend"]["kind"], "mean");
+    assert_eq!(file["metadata"]["sample_time"], 0.5);
+    let bad = sysid(&[
+        "n4sid",
+        "--data",
+        s(&raw),
+        "--order",
+        "2",
+        "--ts=0",
+        "--out",
+        s(&dir.join("x.json")),
+    ]);
+    assert_one_line_error(&bad, &["--ts", "positive"]);
 }

@@ -11,6 +11,17 @@ pub struct Means {
     pub outputs: DVector<f64>,
 }
 
+impl Means {
+    /// The model file's record of the detrending.
+    pub fn describe(&self) -> sysid::kalman::Detrend {
+        sysid::kalman::Detrend {
+            kind: "mean".into(),
+            inputs: self.inputs.iter().copied().collect(),
+            outputs: self.outputs.iter().copied().collect(),
+        }
+    }
+}
+
 /// The `--detrend` option: `none` or `mean`.
 pub fn parse(text: &str) -> Result<bool, CliError> {
     match text {

@@ -646,11 +646,7 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         aic: result.loglik.map(|l| -2.0 * l + 2.0 * k),
         bic: result.loglik.map(|l| -2.0 * l + k * observed.ln()),
         termination: Some(stop.to_string()),
-        detrend: means.as_ref().map(|m| sysid::kalman::Detrend {
-            kind: "mean".into(),
-            inputs: m.inputs.iter().copied().collect(),
-            outputs: m.outputs.iter().copied().collect(),
-        }),
+        detrend: means.as_ref().map(super::detrend::Means::describe),
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     if !probe {

@@ -47,10 +47,20 @@ impl DataArgs {
                 outputs: named(&self.outputs, metadata.map(|m| &m.outputs)),
             },
         )?;
-        match &self.range {
-            None => Ok(file),
-            Some(range) => rows(file, range),
+        let mut file = match &self.range {
+            None => file,
+            Some(range) => rows(file, range)?,
+        };
+        if let Some(ts) = self.ts {
+            if !(ts.is_finite() && ts > 0.0) {
+                return Err(CliError::BadOption {
+                    option: "--ts",
+                    message: format!("{ts} is not a positive sampling interval"),
+                });
+            }
+            file.sample_time = Some(ts);
         }
+        Ok(file)
     }
 }
 

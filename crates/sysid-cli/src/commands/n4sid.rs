@@ -21,6 +21,11 @@ pub struct Options {
     /// SVD weighting: `moesp`, `n4sid` or `cva`.
     #[arg(long, default_value = "moesp")]
     pub weighting: String,
+    /// `mean` removes each signal's mean before the identification and folds the means
+    /// into the written model's offset h (and mu), so that it describes the original
+    /// signals; `none` (the default): N4SID estimates the offset itself.
+    #[arg(long, default_value = "none")]
+    pub detrend: String,
     /// What B and D are fitted for: `prediction` (jointly with A, C on the state
     /// equations; consistent with the noise model) or `simulation` (least squares on the
     /// noise-free simulated output given A, C).
@@ -148,14 +153,20 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         o.stable,
     )?;
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
-    let file = o.data.read()?;
+    let mut file = o.data.read()?;
+    let means = super::detrend::parse(&o.detrend)?.then(|| super::detrend::centre(&mut file));
     let result = n4sid(&file.record, &options)?;
-    let mut spec = ModelSpec::from_model(&result.model);
+    let described = match &means {
+        Some(m) => super::detrend::fold(&result.model, m)?,
+        None => result.model.clone(),
+    };
+    let mut spec = ModelSpec::from_model(&described);
     let chosen = result.order_scores.iter().find(|s| s.order == result.order);
     spec.metadata = Some(sysid::kalman::Metadata {
         order: Some(result.order),
         loglik: chosen.map(|s| s.loglik),
         parameters: chosen.map(|s| s.parameters),
+        detrend: means.as_ref().map(super::detrend::Means::describe),
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     crate::files::write_model(&o.out, o.force, &spec)?;

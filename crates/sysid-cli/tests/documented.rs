@@ -86,10 +86,16 @@ fn every_command_of_the_guide_runs() {
     let lines = all_commands("docs/guide.md");
     assert!(walkthrough.iter().all(|l| lines.contains(l)));
     let dir = run_all(&lines);
+    let svg = std::fs::read_to_string(dir.join("heat-figures/bode.svg")).unwrap();
+    assert!(
+        svg.contains("heat1: 95 % band"),
+        "the structural model's band"
+    );
     for file in [
         "heat.json",
         "heat-figures/compare.svg",
         "heat-figures/resid.png",
+        "heat1.json",
         "heat-pred5.csv",
         "nile-forecast.csv",
     ] {

@@ -406,6 +406,8 @@ fn nile_local_level_with_a_diffuse_start_reaches_statsmodels_maximum() {
     assert!((q / 1469.177 - 1.0).abs() < 1e-3, "Q {q}");
     // standard errors: statsmodels' numerical-Hessian ones (`fit(cov_type="approx")`):
     // 3145.548054571776 (R), 1280.375616587156 (Q); measured within 0.01 %
+    let stored = &fitted["metadata"]["covariance"];
+    assert_eq!(stored["names"], serde_json::json!(["Q[1,1]", "R[1,1]"]));
     let parameters = result["parameters"].as_array().unwrap();
     for (name, want) in [("Q[1,1]", 1280.375616587156), ("R[1,1]", 3145.548054571776)] {
         let p = parameters.iter().find(|p| p["name"] == name).unwrap();

@@ -75,7 +75,7 @@ pub use predict::{Forecast, Predictions};
 pub use response::{Response, fit_percent};
 pub use simulate::Simulation;
 pub use smoother::SmootherOutput;
-pub use spec::{Detrend, Metadata, ModelSpec};
+pub use spec::{Detrend, Metadata, ModelSpec, ParameterCovariance};
 pub use stats::SufficientStatistics;
 
 /// Log-likelihood of a data set of independent records sharing one model: the sum of

@@ -49,6 +49,16 @@ pub struct ModelSpec {
     pub metadata: Option<Metadata>,
 }
 
+/// The covariance of a fit's free parameters, named as `A[1,2]`, `Q[1,1]`, `h[1]`
+/// (1-based), `matrix[k][l]` for the `k`-th and `l`-th names.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ParameterCovariance {
+    /// The parameters, in the order of the rows.
+    pub names: Vec<String>,
+    /// The covariance, by rows.
+    pub matrix: Vec<Vec<f64>>,
+}
+
 /// Means removed from the signals before a fit (`--detrend mean`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Detrend {
@@ -74,6 +84,10 @@ pub struct Metadata {
     /// (and `mu`): the model describes the original signals.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub detrend: Option<Detrend>,
+    /// The free parameters' covariance (inverse observed information), when standard
+    /// errors were computed: plots draw confidence bands from it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covariance: Option<ParameterCovariance>,
     /// Sample time (in the units of the data's time column), when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sample_time: Option<f64>,

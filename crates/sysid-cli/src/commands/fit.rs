@@ -629,6 +629,35 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         Some(m) => super::detrend::fold(&result.estimate, m)?,
         None => result.estimate.clone(),
     };
+    let want_errors = match o.std_errors.as_str() {
+        "on" => true,
+        "off" => false,
+        // a black-box model (free A and C) is not identifiable: no errors unless asked
+        _ => {
+            coordinates > 0
+                && coordinates <= POLISH_AUTO_MAX
+                && !(spec.a && spec.c && result.estimate.n() > 1)
+        }
+    };
+    let uncertainty =
+        want_errors.then(|| sysid::em::linear::standard_errors(&result.estimate, records, &spec));
+    let (parameters, table) =
+        match &uncertainty {
+            Some(Ok(u)) => {
+                (
+                    serde_json::json!(u.parameters.iter().map(|p| serde_json::json!({
+                "name": p.name, "value": p.value, "std_error": p.std_error,
+                "ci95": [p.value - 1.96 * p.std_error, p.value + 1.96 * p.std_error],
+            })).collect::<Vec<_>>()),
+                    parameter_table(u),
+                )
+            }
+            Some(Err(e)) => {
+                warnings.push(format!("no standard errors: {e}"));
+                (serde_json::Value::Null, String::new())
+            }
+            None => (serde_json::Value::Null, String::new()),
+        };
     let mut spec_out = ModelSpec::with_initial(&described, written);
     let observed = file.record.y.iter().filter(|v| !v.is_nan()).count() as f64;
     // a black-box model's entries have n^2 redundant directions (a change of state
@@ -647,6 +676,15 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         bic: result.loglik.map(|l| -2.0 * l + k * observed.ln()),
         termination: Some(stop.to_string()),
         detrend: means.as_ref().map(super::detrend::Means::describe),
+        covariance: match &uncertainty {
+            Some(Ok(u)) => Some(sysid::kalman::ParameterCovariance {
+                names: u.parameters.iter().map(|p| p.name.clone()).collect(),
+                matrix: (0..u.covariance.nrows())
+                    .map(|i| u.covariance.row(i).iter().copied().collect())
+                    .collect(),
+            }),
+            _ => None,
+        },
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     if !probe {
@@ -706,35 +744,6 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         });
     }
     let loglik = result.loglik.unwrap_or(f64::NEG_INFINITY);
-    let want_errors = match o.std_errors.as_str() {
-        "on" => true,
-        "off" => false,
-        // a black-box model (free A and C) is not identifiable: no errors unless asked
-        _ => {
-            coordinates > 0
-                && coordinates <= POLISH_AUTO_MAX
-                && !(spec.a && spec.c && result.estimate.n() > 1)
-        }
-    };
-    let uncertainty =
-        want_errors.then(|| sysid::em::linear::standard_errors(&result.estimate, records, &spec));
-    let (parameters, table) =
-        match &uncertainty {
-            Some(Ok(u)) => {
-                (
-                    serde_json::json!(u.parameters.iter().map(|p| serde_json::json!({
-                "name": p.name, "value": p.value, "std_error": p.std_error,
-                "ci95": [p.value - 1.96 * p.std_error, p.value + 1.96 * p.std_error],
-            })).collect::<Vec<_>>()),
-                    parameter_table(u),
-                )
-            }
-            Some(Err(e)) => {
-                warnings.push(format!("no standard errors: {e}"));
-                (serde_json::Value::Null, String::new())
-            }
-            None => (serde_json::Value::Null, String::new()),
-        };
     let validation_text = match &validation_fit {
         serde_json::Value::Null => String::new(),
         v => format!(

@@ -14,6 +14,7 @@ use crate::error::CliError;
 use crate::files::read_columns;
 use std::path::{Path, PathBuf};
 use sysid::kalman::LinearGaussianModel;
+use sysid::kalman::ParameterCovariance;
 use sysid_plot::{Band, Figure, Panel, Scale, Series, Stroke};
 
 /// Options of `sysid plot`.
@@ -237,6 +238,7 @@ fn data_figure(path: &Path) -> Result<Figure, CliError> {
 /// Bode magnitudes of every channel, one curve per model.
 fn bode_figure(
     models: &[(String, LinearGaussianModel)],
+    covariances: &[Option<ParameterCovariance>],
     sample_time: Option<f64>,
 ) -> Result<Figure, CliError> {
     let (x_label, per) = match sample_time {
@@ -277,22 +279,50 @@ fn bode_figure(
             let mut phase =
                 Panel::new(format!("{}: phase", channel(j)), x_label, "phase (degrees)")
                     .scales(Scale::Log, Scale::Linear);
-            for (name, model) in models {
+            for (k, (name, model)) in models.iter().enumerate() {
                 let response: Vec<Option<nalgebra::Complex<f64>>> = grid
                     .iter()
                     .map(|&w| model.frequency_response(w).map(|g| g[(i, j)]))
                     .collect();
-                let db = grid
+                let db: Vec<(f64, f64)> = grid
                     .iter()
                     .zip(&response)
                     .map(|(&w, g)| (w / per, g.map_or(f64::NAN, |g| 20.0 * g.norm().log10())))
                     .collect();
-                magnitude = magnitude.with_series(Series::line(name.clone(), db));
                 let degrees = unwrapped_degrees(&response);
-                phase = phase.with_series(Series::line(
-                    name.clone(),
-                    grid.iter().map(|w| w / per).zip(degrees).collect(),
-                ));
+                if let Some(sd) = covariances
+                    .get(k)
+                    .and_then(Option::as_ref)
+                    .and_then(|cov| response_sd(model, cov, i, j, &grid))
+                {
+                    let band = |centre: &[f64], spread: &[f64]| -> Vec<(f64, f64, f64)> {
+                        grid.iter()
+                            .zip(centre.iter().zip(spread))
+                            .map(|(w, (c, s))| (w / per, c - 1.96 * s, c + 1.96 * s))
+                            .filter(|(_, lo, hi)| lo.is_finite() && hi.is_finite())
+                            .collect()
+                    };
+                    let db_values: Vec<f64> = db.iter().map(|p| p.1).collect();
+                    let label = format!("{name}: 95 % band");
+                    magnitude = magnitude.with_band(Band {
+                        name: label.clone(),
+                        points: band(&db_values, &sd.0),
+                        colour: k,
+                    });
+                    phase = phase.with_band(Band {
+                        name: label,
+                        points: band(&degrees, &sd.1),
+                        colour: k,
+                    });
+                }
+                magnitude = magnitude.with_series(Series::line(name.clone(), db).colour(k));
+                phase = phase.with_series(
+                    Series::line(
+                        name.clone(),
+                        grid.iter().map(|w| w / per).zip(degrees).collect(),
+                    )
+                    .colour(k),
+                );
             }
             panels.push(magnitude);
             phases.push(phase);
@@ -300,6 +330,98 @@ fn bode_figure(
         panels.extend(phases);
     }
     Ok(Figure::grid(panels, m))
+}
+
+/// The standard deviations of a channel's magnitude (dB) and phase (degrees) along a
+/// frequency grid, by the delta method from the fit's parameter covariance: the
+/// derivatives in the free entries of `A, B, C, D` by central differences. `None` when
+/// none of them is free (the response is then known exactly).
+fn response_sd(
+    model: &LinearGaussianModel,
+    cov: &ParameterCovariance,
+    i: usize,
+    j: usize,
+    grid: &[f64],
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let entries: Vec<(usize, char, usize, usize)> = cov
+        .names
+        .iter()
+        .enumerate()
+        .filter_map(|(k, name)| {
+            let (matrix, rest) = name.split_once('[')?;
+            let (r, c) = rest.trim_end_matches(']').split_once(',')?;
+            let letter = matrix
+                .chars()
+                .next()
+                .filter(|l| "ABCD".contains(*l) && matrix.len() == 1)?;
+            Some((
+                k,
+                letter,
+                r.parse::<usize>().ok()? - 1,
+                c.parse::<usize>().ok()? - 1,
+            ))
+        })
+        .collect();
+    if entries.is_empty() {
+        return None;
+    }
+    let moved = |&(_, letter, r, c): &(usize, char, usize, usize), delta: f64| {
+        let pick = |m: &nalgebra::DMatrix<f64>| {
+            let mut m = m.clone();
+            if r < m.nrows() && c < m.ncols() {
+                m[(r, c)] += delta;
+            }
+            m
+        };
+        let b = model.to_builder();
+        match letter {
+            'A' => b.a(pick(model.a())),
+            'B' => b.b(pick(model.b())),
+            'C' => b.c(pick(model.c())),
+            _ => b.d(pick(model.d())),
+        }
+        .build()
+        .ok()
+    };
+    // derivatives of (dB, degrees) at each frequency, one row per entry
+    let mut jac = Vec::with_capacity(entries.len());
+    for e in &entries {
+        let value = match e.1 {
+            'A' => model.a()[(e.2, e.3)],
+            'B' => model.b()[(e.2, e.3)],
+            'C' => model.c()[(e.2, e.3)],
+            _ => model.d()[(e.2, e.3)],
+        };
+        let h = 1e-6 * value.abs().max(1e-3);
+        let (plus, minus) = (moved(e, h)?, moved(e, -h)?);
+        let row: Vec<(f64, f64)> = grid
+            .iter()
+            .map(
+                |&w| match (plus.frequency_response(w), minus.frequency_response(w)) {
+                    (Some(gp), Some(gm)) => {
+                        let (gp, gm) = (gp[(i, j)], gm[(i, j)]);
+                        let db = 20.0 * (gp.norm().log10() - gm.norm().log10()) / (2.0 * h);
+                        let deg = (gp / gm).arg().to_degrees() / (2.0 * h);
+                        (db, deg)
+                    }
+                    _ => (f64::NAN, f64::NAN),
+                },
+            )
+            .collect();
+        jac.push(row);
+    }
+    let var = |f: &dyn Fn(&(f64, f64)) -> f64, w: usize| -> f64 {
+        let mut v = 0.0;
+        for (a, ea) in entries.iter().enumerate() {
+            for (b, eb) in entries.iter().enumerate() {
+                v += f(&jac[a][w]) * cov.matrix[ea.0][eb.0] * f(&jac[b][w]);
+            }
+        }
+        v.max(0.0).sqrt()
+    };
+    let db = (0..grid.len()).map(|w| var(&|d| d.0, w)).collect();
+    let deg = (0..grid.len()).map(|w| var(&|d| d.1, w)).collect();
+    Some((db, deg))
 }
 
 /// Step (`step`) or impulse responses from rest of every channel, one curve per model,
@@ -398,12 +520,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let mut models = Vec::new();
     let mut sample_times = Vec::new();
     let mut model_kind = Kind::Bode;
+    let mut covariances = Vec::new();
     for path in &o.files {
         match kind_of(path, &o.kind)? {
             kind @ (Kind::Bode | Kind::Step | Kind::Impulse) => {
                 model_kind = kind;
                 let file = crate::files::read_model_file(path)?;
-                sample_times.push(file.metadata.and_then(|m| m.sample_time));
+                sample_times.push(file.metadata.as_ref().and_then(|m| m.sample_time));
+                covariances.push(file.metadata.and_then(|m| m.covariance));
                 models.push((stem(path), file.model));
             }
             kind => {
@@ -428,7 +552,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             Kind::Step | Kind::Impulse => {
                 response_figure(&models, model_kind == Kind::Step, sample_time)?
             }
-            _ => bode_figure(&models, sample_time)?,
+            _ => bode_figure(&models, &covariances, sample_time)?,
         };
         jobs.push((model_kind.name().into(), figure));
     }
@@ -520,5 +644,58 @@ mod response_tests {
         let points = &impulse.panels[0].series[0].points;
         assert_eq!(points[0], (0.0, 0.0));
         assert_eq!(points[3], (6.0, 0.25), "time in units of the sample time");
+    }
+}
+
+#[cfg(test)]
+mod band_tests {
+    use super::response_sd;
+    use nalgebra::{Complex, dmatrix};
+    use sysid::kalman::{LinearGaussianModel, ParameterCovariance};
+
+    /// G(z) = b / (z - a): the delta method's closed form, `d dB / d a = 20 / ln 10
+    /// Re(1 / (z - a))`, `d dB / d b = 20 / (b ln 10)`, `d phase / d a = Im(1 / (z - a))`
+    /// (radians), `d phase / d b = 0`, against the central differences.
+    #[test]
+    fn the_band_is_the_delta_method_of_a_first_order_system() {
+        let (a, b) = (0.8, 0.5);
+        let model =
+            LinearGaussianModel::builder(dmatrix![a], dmatrix![1.0], dmatrix![0.1], dmatrix![0.2])
+                .b(dmatrix![b])
+                .build()
+                .unwrap();
+        let cov = ParameterCovariance {
+            names: vec!["A[1,1]".into(), "B[1,1]".into(), "Q[1,1]".into()],
+            matrix: vec![
+                vec![4e-4, 1e-4, 0.5],
+                vec![1e-4, 9e-4, 0.5],
+                vec![0.5, 0.5, 9.0],
+            ],
+        };
+        let grid = [0.01, 0.3, 1.0, 3.0];
+        let (db, deg) = response_sd(&model, &cov, 0, 0, &grid).unwrap();
+        let k = 20.0 / std::f64::consts::LN_10;
+        for (w, &omega) in grid.iter().enumerate() {
+            let inv = Complex::new(1.0, 0.0) / (Complex::from_polar(1.0, omega) - a);
+            let (ja, jb) = (k * inv.re, k / b);
+            let want_db = (ja * ja * 4e-4 + 2.0 * ja * jb * 1e-4 + jb * jb * 9e-4).sqrt();
+            let want_deg = inv.im.to_degrees().abs() * 4e-4f64.sqrt();
+            assert!(
+                (db[w] - want_db).abs() < 1e-6 * want_db,
+                "dB at {omega}: {} vs {want_db}",
+                db[w]
+            );
+            assert!(
+                (deg[w] - want_deg).abs() < 1e-6 * want_deg,
+                "phase at {omega}: {} vs {want_deg}",
+                deg[w]
+            );
+        }
+        // no free entry of A, B, C, D: no band
+        let noise_only = ParameterCovariance {
+            names: vec!["Q[1,1]".into()],
+            matrix: vec![vec![1.0]],
+        };
+        assert!(response_sd(&model, &noise_only, 0, 0, &grid).is_none());
     }
 }

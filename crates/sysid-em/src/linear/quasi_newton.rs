@@ -46,7 +46,7 @@ pub struct QuasiNewtonOutcome {
     pub evaluations: usize,
     /// Why BFGS stopped (argmin's status), or why it did not run.
     pub status: String,
-    /// BFGS met its gradient tolerance and its result was kept.
+    /// BFGS met its gradient tolerance, and its result was kept or confirmed the start.
     pub converged: bool,
     /// The search headed to a collapsing `R` (a maximum on the boundary of the
     /// parameter set) and its result was not kept.
@@ -584,9 +584,12 @@ pub fn maximise_loglik(
             boundary: false,
         });
     }
+    // BFGS may meet its tolerance without improving on the start (EM had reached the
+    // maximum): the start is then confirmed, and converged
     Ok(QuasiNewtonOutcome {
         iterations,
         evaluations,
+        converged: converged && !*wall.borrow(),
         ..unchanged(format!("{status} (no improvement kept)"), parameters)
     })
 }

@@ -31,6 +31,16 @@ pub enum CliError {
     },
     #[error("{path}: no data rows after the header")]
     NoRows { path: PathBuf },
+    #[error(
+        "{path}: no input or output column: expected u1, u2, ... and y1, y2, ... (or choose \
+         them with --inputs and --outputs); the file has {available}"
+    )]
+    NoSignalColumns { path: PathBuf, available: String },
+    #[error(
+        "{path}: no output column: expected y1, y2, ... (or choose them with --outputs); the \
+         file has {available}"
+    )]
+    NoOutputColumn { path: PathBuf, available: String },
     #[error("{path}, line {line}: expected {expected} fields as in the header, found {found}")]
     Ragged {
         path: PathBuf,

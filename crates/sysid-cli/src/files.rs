@@ -154,9 +154,22 @@ pub struct DataFile {
     pub labels: Vec<String>,
     /// The sampling interval read from a numeric, evenly spaced time column.
     pub sample_time: Option<f64>,
+    /// Every column of the file, in order.
+    pub columns: Vec<String>,
 }
 
 impl DataFile {
+    /// Refuses a file without an output column (for commands that fit or score).
+    pub fn require_outputs(&self, path: &Path) -> Result<(), CliError> {
+        if self.output_names.is_empty() {
+            return Err(CliError::NoOutputColumn {
+                path: path.to_path_buf(),
+                available: self.columns.join(", "),
+            });
+        }
+        Ok(())
+    }
+
     /// Row `t`'s time as written in the file, as a CSV field (quoted if it holds a
     /// comma or a quote).
     pub fn label(&self, t: usize) -> String {
@@ -370,6 +383,12 @@ pub fn parse_data(
     let (header, rows) = parse_rows(reader, path)?;
     let input_cols = select(path, &header, &choice.inputs, 'u')?;
     let output_cols = select(path, &header, &choice.outputs, 'y')?;
+    if input_cols.is_empty() && output_cols.is_empty() {
+        return Err(CliError::NoSignalColumns {
+            path: path.to_path_buf(),
+            available: header.join(", "),
+        });
+    }
     let time_col = header
         .iter()
         .position(|h| matches!(h.to_ascii_lowercase().as_str(), "t" | "time" | "date"));
@@ -438,6 +457,7 @@ pub fn parse_data(
     Ok(DataFile {
         labels,
         sample_time,
+        columns: header.clone(),
         record: Record::new(
             DMatrix::from_vec(input_cols.len(), steps, u),
             DMatrix::from_vec(output_cols.len(), steps, y),

@@ -407,6 +407,7 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         message: e.to_string(),
     })?;
     let mut file = o.data.read()?;
+    file.require_outputs(&o.data.data)?;
     let validation = match o.split {
         None => None,
         Some(fraction) => {
@@ -1097,6 +1098,7 @@ mod tests {
             time: (0..y.ncols()).map(|t| t as f64).collect(),
             labels: (0..y.ncols()).map(|t| t.to_string()).collect(),
             sample_time: None,
+            columns: Vec::new(),
             record: Record::new(u, y),
         }
     }

@@ -154,6 +154,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     )?;
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
     let mut file = o.data.read()?;
+    file.require_outputs(&o.data.data)?;
     let means = super::detrend::parse(&o.detrend)?.then(|| super::detrend::centre(&mut file));
     let result = n4sid(&file.record, &options)?;
     let described = match &means {

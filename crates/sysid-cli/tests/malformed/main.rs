@@ -72,6 +72,8 @@ const CASES: &[Case] = &[
     case("empty file", &[("m.json", MODEL), ("d.csv", "")], SMOOTH, &["d.csv", "empty"]),
     case("blank lines only", &[("m.json", MODEL), ("d.csv", "\n\n")], LOGLIK, &["d.csv", "empty"]),
     case("header only", &[("m.json", MODEL), ("d.csv", "t,y1\n")], SMOOTH, &["d.csv", "no data rows"]),
+    case("no signal columns", &[("m.json", MODEL), ("d.csv", "time,pressure\n1,2\n")], LOGLIK, &["d.csv", "no input or output column", "time, pressure"]),
+    case("no output column", &[("d.csv", "t,u1\n1,2\n2,3\n3,1\n")], N4SID, &["d.csv", "no output column", "--outputs", "t, u1"]),
     case("duplicate column names", &[("m.json", MODEL), ("d.csv", "t,y1,y1\n1,0.5,0.5\n")], SMOOTH, &["d.csv", "line 1", "\"y1\""]),
     case("NaN in an input", &[("d.csv", "t,u1,y1\n1,0.1,0.5\n2,NaN,0.1\n3,0.2,0.3\n")], N4SID, &["d.csv", "line 3", "u1", "input"]),
     case("empty input cell", &[("d.csv", "t,u1,y1\n1,,0.5\n")], N4SID, &["d.csv", "line 2", "u1"]),

@@ -69,9 +69,10 @@ pub(crate) struct DataArgs {
     ts: Option<f64>,
 }
 
-/// A model file, data, and where the states go (`filter`, `smooth`).
-#[derive(Args, Debug)]
-pub(crate) struct StatesArgs {
+/// A model file and a record to run it on, with the record's initial state (`loglik`,
+/// `filter`, `smooth`, `predict`, `forecast`, `resid`).
+#[derive(Args, Debug, Clone)]
+pub(crate) struct ModelOnData {
     /// Model file (JSON, see docs/model-format.md).
     #[arg(long)]
     model: PathBuf,
@@ -82,6 +83,13 @@ pub(crate) struct StatesArgs {
     /// data determine x_1; Durbin and Koopman's diffuse log-likelihood).
     #[arg(long, default_value = "model")]
     initial: String,
+}
+
+/// A model file, data, and where the states go (`filter`, `smooth`).
+#[derive(Args, Debug)]
+pub(crate) struct StatesArgs {
+    #[command(flatten)]
+    source: ModelOnData,
     /// Output CSV file (t, x1.., x1_sd..).
     #[arg(long)]
     out: PathBuf,
@@ -124,16 +132,8 @@ enum Command {
         after_help = "Examples:\n  sysid loglik --model true.json --data d.csv\n  sysid loglik --model fit.json --data d.csv --json\n  sysid loglik --model fit.json --data other.csv --initial diffuse"
     )]
     Loglik {
-        /// Model file (JSON, see docs/model-format.md).
-        #[arg(long)]
-        model: PathBuf,
         #[command(flatten)]
-        data: DataArgs,
-        /// The initial state of the record: `model` (the model file's), `stationary` (the
-        /// stationary law of a stable model's state noise) or `diffuse` (exact diffuse: the
-        /// data determine x_1; Durbin and Koopman's diffuse log-likelihood).
-        #[arg(long, default_value = "model")]
-        initial: String,
+        source: ModelOnData,
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -280,12 +280,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Pmmh(options)) => commands::pmcmc::run_pmmh(&options),
         Some(Command::Pgas(options)) => commands::pmcmc::run_pgas(&options),
         Some(Command::Plot(options)) => commands::plot::run(&options),
-        Some(Command::Loglik {
-            model,
-            data,
-            initial,
-            json,
-        }) => commands::loglik::run(&model, &data, &initial, json),
+        Some(Command::Loglik { source, json }) => commands::loglik::run(&source, json),
         Some(Command::Filter(a)) => commands::smooth::run(&a, commands::smooth::Pass::Filter),
         Some(Command::Smooth(a)) => commands::smooth::run(&a, commands::smooth::Pass::Smooth),
         Some(Command::Bench { runner }) => {

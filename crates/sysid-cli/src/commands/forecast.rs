@@ -1,7 +1,6 @@
 //! `sysid forecast`: outputs beyond the end of a record, with prediction intervals.
 
-use super::{in_data, model_and_data};
-use crate::DataArgs;
+use super::in_data;
 use crate::error::CliError;
 use crate::files::{ColumnChoice, create_output, fmt, read_data};
 use statrs::distribution::{ContinuousCDF, Normal};
@@ -11,11 +10,8 @@ use std::path::PathBuf;
 /// Options of `sysid forecast`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// Model file (JSON, see docs/model-format.md).
-    #[arg(long)]
-    pub model: PathBuf,
     #[command(flatten)]
-    pub data: DataArgs,
+    pub source: crate::ModelOnData,
     /// Number of steps beyond the data.
     #[arg(long)]
     pub steps: usize,
@@ -26,10 +22,6 @@ pub struct Options {
     /// Coverage of the prediction intervals.
     #[arg(long, default_value_t = 0.95)]
     pub level: f64,
-    /// The initial state of the record: `model`, `stationary` or `diffuse` (see
-    /// `sysid loglik --help`).
-    #[arg(long, default_value = "model")]
-    pub initial: String,
     /// Output CSV: step (1..steps after the data), then per output NAME: NAME,
     /// NAME_sd, NAME_lower, NAME_upper.
     #[arg(long)]
@@ -56,7 +48,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         });
     }
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
-    let (model, file) = model_and_data(&o.model, &o.data, &o.initial)?;
+    let (model, file) = o.source.load()?;
     let future = match (&o.future_inputs, model.m()) {
         (_, 0) => nalgebra::DMatrix::zeros(0, o.steps),
         (None, m) => {
@@ -93,7 +85,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     };
     let forecast = model
         .forecast(&file.record, &future, o.steps)
-        .map_err(in_data(&o.data.data))?;
+        .map_err(in_data(o.source.data_path()))?;
     let z = Normal::standard().inverse_cdf(0.5 + o.level / 2.0);
     let mut w = create_output(&o.out, o.force)?;
     let io = |source| CliError::Io {

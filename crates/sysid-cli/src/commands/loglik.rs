@@ -1,14 +1,13 @@
-use super::{in_data, model_and_data};
-use crate::DataArgs;
+use super::in_data;
+use crate::ModelOnData;
 use crate::error::CliError;
-use std::path::Path;
 use sysid::kalman::KalmanWorkspace;
 
-pub fn run(model_path: &Path, data: &DataArgs, initial: &str, json: bool) -> Result<(), CliError> {
-    let (model, file) = model_and_data(model_path, data, initial)?;
+pub fn run(source: &ModelOnData, json: bool) -> Result<(), CliError> {
+    let (model, file) = source.load()?;
     let loglik = KalmanWorkspace::new()
         .loglik(&model, &file.record)
-        .map_err(in_data(&data.data))?;
+        .map_err(in_data(source.data_path()))?;
     let observed = file.record.y.iter().filter(|v| !v.is_nan()).count();
     if json {
         let out = serde_json::json!({

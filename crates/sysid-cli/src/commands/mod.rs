@@ -161,6 +161,19 @@ pub fn parse_initial(text: &str) -> Result<sysid::kalman::InitialState, CliError
     }
 }
 
+impl crate::ModelOnData {
+    /// Reads the model and the data, checks that their columns match, and gives the
+    /// model the chosen initial state.
+    pub fn load(&self) -> Result<(LinearGaussianModel, DataFile), CliError> {
+        model_and_data(&self.model, &self.data, &self.initial)
+    }
+
+    /// The data file, for errors.
+    pub fn data_path(&self) -> &Path {
+        &self.data.data
+    }
+}
+
 /// Wraps a Kalman error with the data file it concerns.
 pub fn in_data(data: &Path) -> impl Fn(sysid::kalman::KalmanError) -> CliError + '_ {
     move |source| CliError::Kalman {

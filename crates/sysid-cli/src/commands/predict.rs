@@ -1,8 +1,7 @@
 //! `sysid predict`: k-step-ahead predicted outputs, their standard deviations, the
 //! prediction errors and the standardised errors.
 
-use super::{in_data, model_and_data};
-use crate::DataArgs;
+use super::in_data;
 use crate::error::CliError;
 use crate::files::{create_output, fmt};
 use std::io::Write;
@@ -12,19 +11,12 @@ use sysid::kalman::fit_percent;
 /// Options of `sysid predict`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// Model file (JSON, see docs/model-format.md).
-    #[arg(long)]
-    pub model: PathBuf,
     #[command(flatten)]
-    pub data: DataArgs,
+    pub source: crate::ModelOnData,
     /// Prediction horizon k: y_t is predicted from the outputs up to t - k (and every
     /// input up to t). 1 gives the innovations.
     #[arg(long, default_value_t = 1)]
     pub horizon: usize,
-    /// The initial state of the record: `model` (the model file's), `stationary` or
-    /// `diffuse` (see `sysid loglik --help`).
-    #[arg(long, default_value = "model")]
-    pub initial: String,
     /// Output CSV: t, then per output NAME: NAME_pred, NAME_sd, NAME_error, NAME_std
     /// (the error divided by the standard deviation).
     #[arg(long)]
@@ -45,10 +37,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         });
     }
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
-    let (model, file) = model_and_data(&o.model, &o.data, &o.initial)?;
+    let (model, file) = o.source.load()?;
     let pred = model
         .predict(&file.record, o.horizon)
-        .map_err(in_data(&o.data.data))?;
+        .map_err(in_data(o.source.data_path()))?;
     let mut w = create_output(&o.out, o.force)?;
     let io = |source| CliError::Io {
         path: o.out.clone(),

@@ -1,8 +1,7 @@
 //! `sysid resid`: are a model's one-step prediction errors white and independent of
 //! the inputs? Autocorrelation, cross-correlation with the inputs, Ljung-Box test.
 
-use super::{in_data, model_and_data};
-use crate::DataArgs;
+use super::in_data;
 use crate::error::CliError;
 use crate::files::{create_output, fmt};
 use std::io::Write;
@@ -13,18 +12,11 @@ use sysid_plot::{Band, Figure, Panel, Series, Stroke};
 /// Options of `sysid resid`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// Model file (JSON, see docs/model-format.md).
-    #[arg(long)]
-    pub model: PathBuf,
     #[command(flatten)]
-    pub data: DataArgs,
+    pub source: crate::ModelOnData,
     /// Lags of the correlations and of the Ljung-Box test.
     #[arg(long, default_value_t = 20)]
     pub lags: usize,
-    /// The initial state of the record: `model`, `stationary` or `diffuse` (see
-    /// `sysid loglik --help`).
-    #[arg(long, default_value = "model")]
-    pub initial: String,
     /// Also write the correlations as CSV: lag, then per output NAME: NAME_acf, and per
     /// output and input: NAME_INPUT_ccf (lags -L..L; the autocorrelation is empty at
     /// negative lags).
@@ -64,10 +56,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .chain(figures.iter().flatten().map(|p| p.as_path()))
         .collect();
     crate::files::refuse_existing(targets, o.force)?;
-    let (model, file) = model_and_data(&o.model, &o.data, &o.initial)?;
+    let (model, file) = o.source.load()?;
     let pred = model
         .predict(&file.record, 1)
-        .map_err(in_data(&o.data.data))?;
+        .map_err(in_data(o.source.data_path()))?;
     let mut tests = Vec::new();
     for (i, name) in file.output_names.iter().enumerate() {
         // the steps where the output is observed and its prediction determined

@@ -1,4 +1,4 @@
-use super::{in_data, model_and_data};
+use super::in_data;
 use crate::StatesArgs;
 use crate::error::CliError;
 use crate::files::{create_output, fmt};
@@ -18,7 +18,7 @@ pub enum Pass {
 type MeanAndSd = (Vec<f64>, Vec<f64>);
 
 pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
-    let (model, file) = model_and_data(&a.model, &a.data, &a.initial)?;
+    let (model, file) = a.source.load()?;
     let mut warnings = Vec::new();
     let mut ws = KalmanWorkspace::new();
     let n = model.n();
@@ -27,7 +27,7 @@ pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
         Pass::Filter => {
             let f = ws
                 .filter(&model, &file.record)
-                .map_err(in_data(&a.data.data))?;
+                .map_err(in_data(a.source.data_path()))?;
             // with a diffuse initial state, the first steps may not determine every
             // state yet: its variance is infinite, written as inf
             let rows = (0..file.record.len())
@@ -58,7 +58,7 @@ pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
         Pass::Smooth => {
             let sm = ws
                 .smooth(&model, &file.record)
-                .map_err(in_data(&a.data.data))?;
+                .map_err(in_data(a.source.data_path()))?;
             let rows = (0..sm.len())
                 .map(|k| {
                     let p = sm.covariance(k);

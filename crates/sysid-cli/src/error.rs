@@ -81,6 +81,10 @@ pub enum CliError {
     },
     #[error("{path}: {source}")]
     Model { path: PathBuf, source: KalmanError },
+    /// A model file's entry that parses but does not fit the model (e.g. its stored
+    /// detrend has the wrong number of signals).
+    #[error("{path}: {message}")]
+    ModelEntry { path: PathBuf, message: String },
     #[error("{context}: {source}")]
     Kalman {
         context: String,

@@ -71,6 +71,9 @@ pub struct ModelFile {
     pub metadata: Option<Metadata>,
     /// How the file describes a record's initial state.
     pub initial: sysid::kalman::InitialState,
+    /// The linear trend the model was fitted without (`--detrend linear`), to remove
+    /// from a record before running the model on it.
+    pub trend: Option<crate::commands::detrend::Trend>,
 }
 
 /// Reads and validates a model file, with its metadata if it has any.
@@ -84,10 +87,20 @@ pub fn read_model_file(path: &Path) -> Result<ModelFile, CliError> {
         path: path.to_path_buf(),
         source,
     })?;
+    let trend = crate::commands::detrend::Trend::stored(
+        spec.metadata.as_ref().and_then(|m| m.detrend.as_ref()),
+        model.m(),
+        model.p(),
+    )
+    .map_err(|message| CliError::ModelEntry {
+        path: path.to_path_buf(),
+        message: format!("metadata: {message}"),
+    })?;
     Ok(ModelFile {
         model,
         metadata: spec.metadata,
         initial: spec.initial,
+        trend,
     })
 }
 
@@ -138,6 +151,9 @@ pub struct ColumnChoice {
     pub inputs: Option<Vec<String>>,
     /// Output column names; `None` means every column whose name starts with `y`.
     pub outputs: Option<Vec<String>>,
+    /// Named outputs that are not all in the file mean a record without outputs (an
+    /// inputs-only file to simulate), instead of an error.
+    pub outputs_if_present: bool,
 }
 
 /// A data file read into a record, with its time column if it has one.
@@ -156,9 +172,37 @@ pub struct DataFile {
     pub sample_time: Option<f64>,
     /// Every column of the file, in order.
     pub columns: Vec<String>,
+    /// A linear trend removed from the record (a model fitted with `--detrend linear`),
+    /// added back to outputs by [`DataFile::restored`].
+    pub trend: Option<crate::commands::detrend::Trend>,
 }
 
 impl DataFile {
+    /// Outputs of the model of the detrended record in the file's units: the removed
+    /// outputs' trend added back (unchanged when nothing was removed).
+    pub fn restored(&self, outputs: &DMatrix<f64>) -> DMatrix<f64> {
+        match &self.trend {
+            Some(trend) => outputs + trend.outputs_at(&self.time),
+            None => outputs.clone(),
+        }
+    }
+
+    /// The measured outputs in the file's units.
+    pub fn measured(&self) -> DMatrix<f64> {
+        self.restored(&self.record.y)
+    }
+
+    /// The times of `steps` rows after the last, at the file's sampling interval (its
+    /// sample time, or the mean spacing of its times).
+    pub fn times_after(&self, steps: usize) -> Vec<f64> {
+        let last = self.time.last().copied().unwrap_or(0.0);
+        let spacing = self.sample_time.unwrap_or_else(|| match self.time.len() {
+            0 | 1 => 1.0,
+            n => (last - self.time[0]) / (n - 1) as f64,
+        });
+        (1..=steps).map(|j| last + spacing * j as f64).collect()
+    }
+
     /// Refuses a file without an output column (for commands that fit or score).
     pub fn require_outputs(&self, path: &Path) -> Result<(), CliError> {
         if self.output_names.is_empty() {
@@ -382,7 +426,12 @@ pub fn parse_data(
 ) -> Result<DataFile, CliError> {
     let (header, rows) = parse_rows(reader, path)?;
     let input_cols = select(path, &header, &choice.inputs, 'u')?;
-    let output_cols = select(path, &header, &choice.outputs, 'y')?;
+    let output_cols = match &choice.outputs {
+        Some(names) if choice.outputs_if_present && names.iter().any(|n| !header.contains(n)) => {
+            Vec::new()
+        }
+        _ => select(path, &header, &choice.outputs, 'y')?,
+    };
     if input_cols.is_empty() && output_cols.is_empty() {
         return Err(CliError::NoSignalColumns {
             path: path.to_path_buf(),
@@ -465,6 +514,7 @@ pub fn parse_data(
         input_names: name(&input_cols),
         output_names: name(&output_cols),
         time,
+        trend: None,
     })
 }
 

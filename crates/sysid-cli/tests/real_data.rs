@@ -1373,6 +1373,196 @@ fn detrend_mean_gives_a_model_of_the_original_signals() {
     );
 }
 
+/// `fit lti` of the heating record at `order` with `--detrend detrend`, fitted on its
+/// first half (`--split 0.5`, 400 rows) and written to `out`: the summary, after
+/// checking that its validation fits are those `compare` gives on rows 401.. .
+fn split_heating_fit(order: &str, detrend: &str, out: &std::path::Path) -> serde_json::Value {
+    let raw = data("heating_system.csv");
+    let result = summary(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&raw),
+        "--order",
+        order,
+        "--detrend",
+        detrend,
+        "--max-iter",
+        "60",
+        "--std-errors",
+        "off",
+        "--split",
+        "0.5",
+        "--out",
+        s(out),
+        "--json",
+    ]));
+    let validation = &result["validation"];
+    assert_eq!(validation["rows"], 401);
+    for (key, horizon) in [
+        ("simulation_fit_percent", "inf"),
+        ("prediction_fit_percent", "1"),
+    ] {
+        let want = compared_fit(out, &raw, &["--range", "401:", "--horizon", horizon]);
+        let got = validation[key].as_f64().unwrap();
+        assert!(
+            (got - want).abs() < 1e-9,
+            "{key}: {got} vs compare's {want}"
+        );
+    }
+    result
+}
+
+/// A CSV's numeric columns by name (the first column's labels parsed as numbers).
+fn csv_columns(path: &std::path::Path) -> std::collections::HashMap<String, Vec<f64>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let mut columns: std::collections::HashMap<String, Vec<f64>> =
+        header.iter().map(|h| (h.clone(), Vec::new())).collect();
+    for line in lines {
+        for (h, v) in header.iter().zip(line.split(',')) {
+            columns.get_mut(h).unwrap().push(v.parse().unwrap());
+        }
+    }
+    columns
+}
+
+/// `--detrend linear`: the lines stored in the model are numpy's least-squares lines
+/// of the estimation rows; every command run on raw data gives what the model of the
+/// detrended signals gives on the detrended data, plus the output's line at the
+/// record's times (later rows: the line continued; forecasts: past the last time), and
+/// the split's validation fit is what compare gives on the held-out rows.
+#[test]
+fn detrend_linear_is_removed_and_restored_at_the_records_times() {
+    let dir = scratch_dir();
+    let raw = data("heating_system.csv");
+    let fitted = dir.join("linear.json");
+    split_heating_fit("2", "linear", &fitted);
+    let spec = model(&fitted);
+    let line = &spec["metadata"]["detrend"];
+    assert_eq!(line["kind"], "linear");
+    // numpy 2.4.6: np.polyfit(t - t[0], column, 1) over rows 1..400
+    for (key, slope_key, want, want_slope) in [
+        (
+            "inputs",
+            "input_slopes",
+            10.24064837905237,
+            -0.009375058594116217,
+        ),
+        (
+            "outputs",
+            "output_slopes",
+            201.83066044887784,
+            -0.14292947480921755,
+        ),
+    ] {
+        let got = line[key][0].as_f64().unwrap();
+        let slope = line[slope_key][0].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-9 * want.abs(), "{key}: {got}");
+        assert!((slope - want_slope).abs() < 1e-9, "{slope_key}: {slope}");
+    }
+    let value = |key: &str, slope_key: &str, t: f64| {
+        line[key][0].as_f64().unwrap()
+            + line[slope_key][0].as_f64().unwrap() * (t - line["origin"].as_f64().unwrap())
+    };
+    // the same model without its stored line, and rows 401.. detrended by hand
+    let mut plain_spec = spec.clone();
+    plain_spec["metadata"]
+        .as_object_mut()
+        .unwrap()
+        .remove("detrend");
+    let plain = dir.join("plain.json");
+    std::fs::write(&plain, plain_spec.to_string()).unwrap();
+    let rows = csv_columns(&raw);
+    let detrended = dir.join("detrended.csv");
+    let body: Vec<String> = (400..rows["t"].len())
+        .map(|i| {
+            let t = rows["t"][i];
+            format!(
+                "{t},{},{}",
+                rows["u1"][i] - value("inputs", "input_slopes", t),
+                rows["y1"][i] - value("outputs", "output_slopes", t)
+            )
+        })
+        .collect();
+    std::fs::write(&detrended, format!("t,u1,y1\n{}\n", body.join("\n"))).unwrap();
+    let held_out = ["--range", "401:"];
+    let run = |command: &[&str], model: &PathBuf, data: &PathBuf, extra: &[&str], out: &str| {
+        let out = dir.join(out);
+        let mut args = command.to_vec();
+        args.extend_from_slice(&["--model", s(model), "--data", s(data), "--out", s(&out)]);
+        args.extend_from_slice(extra);
+        assert_ok(&sysid(&args));
+        csv_columns(&out)
+    };
+    let close = |what: &str, a: f64, b: f64| {
+        assert!((a - b).abs() < 1e-8 * (1.0 + b.abs()), "{what}: {a} vs {b}");
+    };
+    let raw_pred = run(&["predict"], &fitted, &raw, &held_out, "p_raw.csv");
+    let plain_pred = run(&["predict"], &plain, &detrended, &[], "p_plain.csv");
+    let sim_raw = run(&["simulate"], &fitted, &raw, &held_out, "s_raw.csv");
+    let sim_plain = run(&["simulate"], &plain, &detrended, &[], "s_plain.csv");
+    for i in 0..plain_pred["t"].len() {
+        let t = plain_pred["t"][i];
+        let y_line = value("outputs", "output_slopes", t);
+        close(
+            "prediction",
+            raw_pred["y1_pred"][i],
+            plain_pred["y1_pred"][i] + y_line,
+        );
+        close("error", raw_pred["y1_error"][i], plain_pred["y1_error"][i]);
+        close("simulation", sim_raw["y1"][i], sim_plain["y1"][i] + y_line);
+        close("input written", sim_raw["u1"][i], rows["u1"][400 + i]);
+    }
+    // forecasts past the last time (1600 s, sample time 2 s) with the heater at 9
+    let last = *rows["t"].last().unwrap();
+    let future: Vec<f64> = (1..=5).map(|j| last + 2.0 * j as f64).collect();
+    let (future_raw, future_plain) = (dir.join("future_raw.csv"), dir.join("future_plain.csv"));
+    let inputs = |shift: &dyn Fn(f64) -> f64| {
+        let body: Vec<String> = future
+            .iter()
+            .map(|&t| format!("{t},{}", 9.0 - shift(t)))
+            .collect();
+        format!("t,u1\n{}\n", body.join("\n"))
+    };
+    std::fs::write(&future_raw, inputs(&|_| 0.0)).unwrap();
+    std::fs::write(
+        &future_plain,
+        inputs(&|t| value("inputs", "input_slopes", t)),
+    )
+    .unwrap();
+    let steps = ["--steps", "5", "--future-inputs"];
+    let fc_raw = run(
+        &["forecast"],
+        &fitted,
+        &raw,
+        &[&steps[..], &[s(&future_raw)]].concat(),
+        "f_raw.csv",
+    );
+    let fc_plain = run(
+        &["forecast"],
+        &plain,
+        &detrended,
+        &[&steps[..], &[s(&future_plain)]].concat(),
+        "f_plain.csv",
+    );
+    for (j, &t) in future.iter().enumerate() {
+        let y_line = value("outputs", "output_slopes", t);
+        close("forecast", fc_raw["y1"][j], fc_plain["y1"][j] + y_line);
+        close("forecast sd", fc_raw["y1_sd"][j], fc_plain["y1_sd"][j]);
+    }
+    // a stored line that does not fit the model is named
+    let mut broken = spec.clone();
+    broken["metadata"]["detrend"]["output_slopes"] = serde_json::json!([]);
+    let broken_path = dir.join("broken.json");
+    std::fs::write(&broken_path, broken.to_string()).unwrap();
+    assert_one_line_error(
+        &sysid(&["loglik", "--model", s(&broken_path), "--data", s(&raw)]),
+        &["broken.json", "detrend.output_slopes has 0 entries"],
+    );
+}
+
 /// `--range` picks rows of one file: fitting on rows 1-400 and comparing on 401- gives
 /// what the same commands give on two files holding those rows; a range outside the
 /// file is named.
@@ -1605,39 +1795,8 @@ fn delimiters_time_labels_and_the_sample_time() {
 /// on the second, the figures `compare` gives on those rows.
 #[test]
 fn split_reports_the_validation_fit_that_compare_gives() {
-    let dir = scratch_dir();
     let raw = data("heating_system.csv");
-    let out = dir.join("split.json");
-    let result = summary(&sysid(&[
-        "fit",
-        "lti",
-        "--data",
-        s(&raw),
-        "--order",
-        "3",
-        "--detrend",
-        "mean",
-        "--max-iter",
-        "60",
-        "--split",
-        "0.5",
-        "--out",
-        s(&out),
-        "--json",
-    ]));
-    let validation = &result["validation"];
-    assert_eq!(validation["rows"], 401);
-    for (key, horizon) in [
-        ("simulation_fit_percent", "inf"),
-        ("prediction_fit_percent", "1"),
-    ] {
-        let want = compared_fit(&out, &raw, &["--range", "401:", "--horizon", horizon]);
-        let got = validation[key].as_f64().unwrap();
-        assert!(
-            (got - want).abs() < 1e-9,
-            "{key}: {got} vs compare's {want}"
-        );
-    }
+    split_heating_fit("3", "mean", &scratch_dir().join("split.json"));
     assert_fit_refused(
         &raw,
         &["--order", "2", "--split", "1.5"],

@@ -59,15 +59,32 @@ pub struct ParameterCovariance {
     pub matrix: Vec<Vec<f64>>,
 }
 
-/// Means removed from the signals before a fit (`--detrend mean`).
+/// The trends removed from the signals before a fit (`--detrend mean|linear`).
+///
+/// `mean`: the means are folded into the model's offset `h` (and `mu`), so the model
+/// describes the original signals and nothing is left to apply. `linear`: a straight
+/// line in time per signal, `value(t) = offset + slope (t - origin)`, with `t` the data
+/// file's time (its numeric time column, or the row number); a linear trend cannot be
+/// folded into a time-invariant model, so the model describes the detrended signals
+/// and every command that runs it on a record removes the trends at the record's times
+/// and adds the outputs' trend back to what it returns.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Detrend {
-    /// `mean`.
+    /// `mean` or `linear`.
     pub kind: String,
-    /// The inputs' means.
+    /// The inputs' means (`mean`), or their trends' values at `origin` (`linear`).
     pub inputs: Vec<f64>,
-    /// The outputs' means.
+    /// The outputs' means (`mean`), or their trends' values at `origin` (`linear`).
     pub outputs: Vec<f64>,
+    /// `linear`: the time at which the offsets hold (the fitted record's first time).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<f64>,
+    /// `linear`: the inputs' slopes per unit of time.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub input_slopes: Vec<f64>,
+    /// `linear`: the outputs' slopes per unit of time.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub output_slopes: Vec<f64>,
 }
 
 /// A model file's description of its data and of its fit (every entry optional;
@@ -80,8 +97,9 @@ pub struct Metadata {
     /// Names of the output columns, in the model's order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outputs: Vec<String>,
-    /// The detrending the model was fitted with, already folded into its offset `h`
-    /// (and `mu`): the model describes the original signals.
+    /// The detrending the model was fitted with: means are already folded into its
+    /// offset `h` (and `mu`); a linear trend is applied by the commands that use the
+    /// model on data (see [`Detrend`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub detrend: Option<Detrend>,
     /// The free parameters' covariance (inverse observed information), when standard

@@ -104,14 +104,20 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                     .mean
             }
         };
-        let fit = fit_percent(&file.record.y, &outputs, o.burn_in);
+        // in the file's units (a model fitted with --detrend linear)
+        let outputs = file.restored(&outputs);
+        let fit = fit_percent(&file.measured(), &outputs, o.burn_in);
         let mean = fit.iter().sum::<f64>() / fit.len() as f64;
         rows.push(serde_json::json!({
             "model": path, "fit_percent": fit, "fit_percent_mean": mean,
         }));
         curves.push((path.display().to_string(), outputs, fit));
         file_names.get_or_insert(file.output_names.clone());
-        data.get_or_insert(file);
+        data.get_or_insert_with(|| {
+            let mut original = file;
+            original.record.y = original.measured();
+            original
+        });
     }
     let file = data.expect("at least one model");
     let names = file_names.unwrap_or_default();

@@ -18,7 +18,9 @@ const POLISH_AUTO_MAX: usize = 20;
 /// (by its own estimate).
 const POLISH_SWITCH_NATS: f64 = 0.1;
 use sysid::em::{EmOptions, Termination};
-use sysid::kalman::{InitialState, LinearGaussianModel, ModelSpec, stationary_covariance};
+use sysid::kalman::{
+    InitialState, LinearGaussianModel, ModelSpec, fit_percent, stationary_covariance,
+};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 
 /// Options of `sysid fit`.
@@ -119,7 +121,12 @@ pub struct Options {
     pub std_errors: String,
     /// Linear EM: `mean` removes each signal's mean before the fit and folds the means
     /// into the written model's offset h (and mu), so that it describes, predicts and
-    /// simulates the original signals; `none` (the default) fits them as they are.
+    /// simulates the original signals; `linear` removes a straight line in time (the
+    /// time column, or the row number) from each signal and stores the lines in the
+    /// model: predict, compare, simulate, forecast, resid, loglik, filter and smooth
+    /// remove them from a record at its times and return outputs in the original units
+    /// (states are those of the detrended signals); `none` (the default) fits the
+    /// signals as they are.
     #[arg(long, default_value = "none")]
     pub detrend: String,
     /// Linear EM: fit on the first FRACTION of the rows (after --range) and report the
@@ -427,7 +434,7 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
             Some(rest)
         }
     };
-    let means = super::detrend::parse(&o.detrend)?.then(|| super::detrend::centre(&mut file));
+    let trend = super::detrend::apply(&mut file, super::detrend::parse(&o.detrend)?)?;
     non_negative("--min-variance", o.min_variance)?;
     non_negative("--min-output-noise", o.min_output_noise)?;
     let mut spec = LinearEmSpec {
@@ -626,10 +633,7 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
     } else {
         InitialState::Diffuse
     };
-    let described = match &means {
-        Some(m) => super::detrend::fold(&result.estimate, m)?,
-        None => result.estimate.clone(),
-    };
+    let described = super::detrend::written_model(&result.estimate, trend.as_ref())?;
     let want_errors = match o.std_errors.as_str() {
         "on" => true,
         "off" => false,
@@ -676,7 +680,7 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         aic: result.loglik.map(|l| -2.0 * l + 2.0 * k),
         bic: result.loglik.map(|l| -2.0 * l + k * observed.ln()),
         termination: Some(stop.to_string()),
-        detrend: means.as_ref().map(super::detrend::Means::describe),
+        detrend: trend.as_ref().map(super::detrend::Trend::describe),
         covariance: match &uncertainty {
             Some(Ok(u)) => Some(sysid::kalman::ParameterCovariance {
                 names: u.parameters.iter().map(|p| p.name.clone()).collect(),
@@ -696,6 +700,16 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
     let validation_fit = match &validation {
         None => serde_json::Value::Null,
         Some(rest) => {
+            // a linear trend continues over the held-out rows; the fits are in the
+            // file's units
+            let mut rest = rest.clone();
+            if let Some(t) = trend
+                .as_ref()
+                .filter(|t| t.kind == super::detrend::Kind::Linear)
+            {
+                t.remove(&mut rest);
+            }
+            let measured = rest.measured();
             let model = written
                 .apply_to_record(&described, &rest.record)
                 .map_err(|source| CliError::Kalman {
@@ -705,10 +719,10 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
             let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
             let simulation = model
                 .response(&rest.record, None)
-                .map(|r| mean(sysid::kalman::fit_percent(&rest.record.y, &r.outputs, 0)));
+                .map(|r| mean(fit_percent(&measured, &rest.restored(&r.outputs), 0)));
             let prediction = model
                 .predict(&rest.record, 1)
-                .map(|p| mean(sysid::kalman::fit_percent(&rest.record.y, &p.mean, 0)));
+                .map(|p| mean(fit_percent(&measured, &rest.restored(&p.mean), 0)));
             serde_json::json!({
                 "rows": rest.record.len(),
                 "simulation_fit_percent": simulation.ok(),
@@ -1099,6 +1113,7 @@ mod tests {
             labels: (0..y.ncols()).map(|t| t.to_string()).collect(),
             sample_time: None,
             columns: Vec::new(),
+            trend: None,
             record: Record::new(u, y),
         }
     }

@@ -67,6 +67,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 &ColumnChoice {
                     inputs: Some(file.input_names.clone()),
                     outputs: Some(Vec::new()),
+                    outputs_if_present: false,
                 },
             )?;
             if inputs.record.len() < o.steps {
@@ -83,9 +84,18 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             inputs.record.u.columns(0, o.steps).clone_owned()
         }
     };
-    let forecast = model
+    // a model fitted with --detrend linear: the trends continue past the record
+    let future_times = file.times_after(o.steps);
+    let future = match &file.trend {
+        Some(trend) if model.m() > 0 => future - trend.inputs_at(&future_times),
+        _ => future,
+    };
+    let mut forecast = model
         .forecast(&file.record, &future, o.steps)
         .map_err(in_data(o.source.data_path()))?;
+    if let Some(trend) = &file.trend {
+        forecast.mean += trend.outputs_at(&future_times);
+    }
     let z = Normal::standard().inverse_cdf(0.5 + o.level / 2.0);
     let mut w = create_output(&o.out, o.force)?;
     let io = |source| CliError::Io {

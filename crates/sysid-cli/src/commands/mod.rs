@@ -35,6 +35,39 @@ impl DataArgs {
     /// Reads the data file with the chosen columns, or, where none are chosen, the
     /// columns a model was fitted on (its metadata's names).
     pub fn read_for(&self, metadata: Option<&Metadata>) -> Result<DataFile, CliError> {
+        self.read_columns(metadata, false)
+    }
+
+    /// Reads the data file to run a model file on: the model's columns where none are
+    /// chosen, its stored linear trend removed (added back by
+    /// [`DataFile::restored`]). With `outputs_if_present`, a file without the model's
+    /// outputs is read as inputs only.
+    pub fn read_for_model(
+        &self,
+        stored: &crate::files::ModelFile,
+        outputs_if_present: bool,
+    ) -> Result<DataFile, CliError> {
+        let mut file = self.read_columns(stored.metadata.as_ref(), outputs_if_present)?;
+        if let Some(trend) = &stored.trend {
+            check_column_counts(
+                &file,
+                stored.model.m(),
+                if file.output_names.is_empty() {
+                    0
+                } else {
+                    stored.model.p()
+                },
+            )?;
+            trend.remove(&mut file);
+        }
+        Ok(file)
+    }
+
+    fn read_columns(
+        &self,
+        metadata: Option<&Metadata>,
+        outputs_if_present: bool,
+    ) -> Result<DataFile, CliError> {
         let named = |given: &Option<Vec<String>>, stored: Option<&Vec<String>>| {
             given
                 .clone()
@@ -45,6 +78,7 @@ impl DataArgs {
             &ColumnChoice {
                 inputs: named(&self.inputs, metadata.map(|m| &m.inputs)),
                 outputs: named(&self.outputs, metadata.map(|m| &m.outputs)),
+                outputs_if_present,
             },
         )?;
         let mut file = match &self.range {
@@ -128,7 +162,7 @@ pub fn model_and_data(
 ) -> Result<(LinearGaussianModel, DataFile), CliError> {
     let path = model;
     let stored = read_model_file(path)?;
-    let file = data.read_for(stored.metadata.as_ref())?;
+    let file = data.read_for_model(&stored, false)?;
     let model = stored.model;
     check_columns(&model, &file)?;
     // `model`: the file's own initial state (a stationary one, at this record's first

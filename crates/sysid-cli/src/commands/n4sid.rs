@@ -23,7 +23,10 @@ pub struct Options {
     pub weighting: String,
     /// `mean` removes each signal's mean before the identification and folds the means
     /// into the written model's offset h (and mu), so that it describes the original
-    /// signals; `none` (the default): N4SID estimates the offset itself.
+    /// signals; `linear` removes a straight line in time from each signal and stores
+    /// the lines in the model, and the commands that use it remove them from a record
+    /// and add the outputs' line back; `none` (the default): N4SID estimates the offset
+    /// itself.
     #[arg(long, default_value = "none")]
     pub detrend: String,
     /// What B and D are fitted for: `prediction` (jointly with A, C on the state
@@ -155,19 +158,16 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
     let mut file = o.data.read()?;
     file.require_outputs(&o.data.data)?;
-    let means = super::detrend::parse(&o.detrend)?.then(|| super::detrend::centre(&mut file));
+    let trend = super::detrend::apply(&mut file, super::detrend::parse(&o.detrend)?)?;
     let result = n4sid(&file.record, &options)?;
-    let described = match &means {
-        Some(m) => super::detrend::fold(&result.model, m)?,
-        None => result.model.clone(),
-    };
+    let described = super::detrend::written_model(&result.model, trend.as_ref())?;
     let mut spec = ModelSpec::from_model(&described);
     let chosen = result.order_scores.iter().find(|s| s.order == result.order);
     spec.metadata = Some(sysid::kalman::Metadata {
         order: Some(result.order),
         loglik: chosen.map(|s| s.loglik),
         parameters: chosen.map(|s| s.parameters),
-        detrend: means.as_ref().map(super::detrend::Means::describe),
+        detrend: trend.as_ref().map(super::detrend::Trend::describe),
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     crate::files::write_model(&o.out, o.force, &spec)?;

@@ -38,9 +38,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     }
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
     let (model, file) = o.source.load()?;
-    let pred = model
+    let mut pred = model
         .predict(&file.record, o.horizon)
         .map_err(in_data(o.source.data_path()))?;
+    // in the file's units (a model fitted with --detrend linear)
+    pred.mean = file.restored(&pred.mean);
     let mut w = create_output(&o.out, o.force)?;
     let io = |source| CliError::Io {
         path: o.out.clone(),
@@ -68,7 +70,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
     w.commit()?;
-    let fit = fit_percent(&file.record.y, &pred.mean, 0);
+    let fit = fit_percent(&file.measured(), &pred.mean, 0);
     // the spread of the standardised errors: about 1 for a model that describes its
     // own uncertainty
     let spread: Vec<f64> = (0..model.p())

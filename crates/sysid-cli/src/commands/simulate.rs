@@ -20,6 +20,10 @@ pub struct Options {
     /// least squares and are compared with the simulation).
     #[arg(long, requires = "model")]
     pub data: Option<PathBuf>,
+    /// With --model: use only the data rows START..=END (1-based), as the other
+    /// commands' --range.
+    #[arg(long, requires = "model")]
+    pub range: Option<String>,
     /// With --model: the initial state, `estimate` (least squares against the record's
     /// outputs; the default when it has them), `model` (the model's mu) or `zero`.
     #[arg(long)]

@@ -2,7 +2,7 @@
 
 use super::simulate::Options;
 use crate::error::CliError;
-use crate::files::{ColumnChoice, create_output, fmt, read_data, read_model};
+use crate::files::{create_output, fmt, read_model_file};
 use nalgebra::DVector;
 use rand::SeedableRng;
 use std::io::Write;
@@ -17,8 +17,17 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         });
     };
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
-    let model = read_model(model_path)?;
-    let file = read_data(data_path, &ColumnChoice::default())?;
+    let stored = read_model_file(model_path)?;
+    // the model's columns (outputs only if the file has them), its linear trend removed
+    let data = crate::DataArgs {
+        data: data_path.clone(),
+        inputs: None,
+        outputs: None,
+        range: o.range.clone(),
+        ts: None,
+    };
+    let file = data.read_for_model(&stored, true)?;
+    let model = stored.model;
     super::check_column_counts(&file, model.m(), file.output_names.len())?;
     let has_outputs = !file.output_names.is_empty();
     if has_outputs {
@@ -86,8 +95,21 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             .map_err(model_error)?
             .outputs
     };
+    // in the file's units (a model fitted with --detrend linear)
+    let outputs = file.restored(&outputs);
+    let inputs = match &file.trend {
+        Some(trend) => &record.u + trend.inputs_at(&file.time),
+        None => record.u.clone(),
+    };
+    let stored_names = stored
+        .metadata
+        .as_ref()
+        .map(|m| m.outputs.clone())
+        .filter(|names| names.len() == model.p());
     let names: Vec<String> = if has_outputs {
         file.output_names.clone()
+    } else if let Some(names) = stored_names {
+        names
     } else {
         (1..=model.p()).map(|i| format!("y{i}")).collect()
     };
@@ -102,12 +124,12 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     writeln!(w, "{}", header.join(",")).map_err(io)?;
     for t in 0..record.len() {
         let mut row = vec![file.label(t)];
-        row.extend(record.u.column(t).iter().map(|&v| fmt(v)));
+        row.extend(inputs.column(t).iter().map(|&v| fmt(v)));
         row.extend(outputs.column(t).iter().map(|&v| fmt(v)));
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
     w.commit()?;
-    let fit = has_outputs.then(|| fit_percent(&record.y, &outputs, 0));
+    let fit = has_outputs.then(|| fit_percent(&file.measured(), &outputs, 0));
     crate::report(
         o.json,
         serde_json::json!({

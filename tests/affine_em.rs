@@ -122,6 +122,41 @@ fn m_step_on_kalman_statistics_equals_the_linear_em_m_step() {
     }
 }
 
+/// Exact affine EM on a scalar linear model in affine form: the E-step from the
+/// Kalman smoother with the particle E-step's statistics convention (pairs
+/// `(x_t, x_{t+1})` for `t < T - 1`), 500 iterations from `start`.
+fn exact_affine_em(
+    affine: &LinearAffine,
+    record: &sysid::kalman::Record,
+    start: &sysid::em::affine::AffineParams,
+    spec: &AffineEmSpec,
+) -> sysid::em::affine::AffineParams {
+    let y = record.y.as_slice().to_vec();
+    let steps = y.len();
+    let mut ws = KalmanWorkspace::new();
+    let mut params = start.clone();
+    for _ in 0..500 {
+        let model = affine.model(&params).unwrap();
+        let sm = ws.smooth(&model, record).unwrap();
+        let m = |t: usize| sm.mean(t)[0];
+        let p = |t: usize| sm.covariance(t)[(0, 0)];
+        let mut stats = AffineStatistics::zeros(1, 1, 1);
+        for (t, &yt) in y.iter().enumerate() {
+            let xx = m(t) * m(t) + p(t);
+            stats.output += dmatrix![xx, m(t) * yt; m(t) * yt, yt * yt];
+            stats.output_steps += 1.0;
+            if t + 1 < steps {
+                let cross = m(t) * m(t + 1) + sm.lag_one_covariance(t)[(0, 0)];
+                let nn = m(t + 1) * m(t + 1) + p(t + 1);
+                stats.state += dmatrix![xx, cross; cross, nn];
+                stats.state_steps += 1.0;
+            }
+        }
+        params = m_step(affine, &stats, &params, spec).unwrap();
+    }
+    params
+}
+
 #[test]
 fn particle_em_on_lgss_reaches_the_exact_em_estimate() {
     let truth = lgss();
@@ -147,31 +182,8 @@ fn particle_em_on_lgss_reaches_the_exact_em_estimate() {
         p1: false,
         ..LinearEmSpec::default()
     };
-    // The reference: exact EM with the same statistics convention as the particle
-    // E-step (pairs (x_t, x_{t+1}) for t < T - 1), the E-step from the Kalman smoother.
+    let exact_params = exact_affine_em(&affine, &sim.record, &start, &spec);
     let y = sim.record.y.as_slice().to_vec();
-    let steps = y.len();
-    let mut ws = KalmanWorkspace::new();
-    let mut exact_params = start.clone();
-    for _ in 0..500 {
-        let model = affine.model(&exact_params).unwrap();
-        let sm = ws.smooth(&model, &sim.record).unwrap();
-        let m = |t: usize| sm.mean(t)[0];
-        let p = |t: usize| sm.covariance(t)[(0, 0)];
-        let mut stats = AffineStatistics::zeros(1, 1, 1);
-        for (t, &yt) in y.iter().enumerate() {
-            let xx = m(t) * m(t) + p(t);
-            stats.output += dmatrix![xx, m(t) * yt; m(t) * yt, yt * yt];
-            stats.output_steps += 1.0;
-            if t + 1 < steps {
-                let cross = m(t) * m(t + 1) + sm.lag_one_covariance(t)[(0, 0)];
-                let nn = m(t + 1) * m(t + 1) + p(t + 1);
-                stats.state += dmatrix![xx, cross; cross, nn];
-                stats.state_steps += 1.0;
-            }
-        }
-        exact_params = m_step(&affine, &stats, &exact_params, &spec).unwrap();
-    }
     let exact = [
         exact_params.beta_x[(0, 0)],
         exact_params.pi_x[(0, 0)],
@@ -325,4 +337,93 @@ fn psaem_with_fifteen_particles_reaches_the_nlbench_truth() {
     // q was free and comes back near its true value (it is not pinned by the spec)
     assert!(rel(estimate.q, truth.q) < 0.5, "q {}", estimate.q);
     assert_eq!(estimate.r, truth.r);
+}
+
+/// The robust driver from a rough start (A at 40 % of the truth, Q 5 times it) on a
+/// linear model in affine form lands on exact EM's fixed point (Kalman E-step), with
+/// R held at the user's value in the refinement (explored free, put back); the same
+/// seed gives the same bits on 1 and 2 threads; bad options are refused.
+#[test]
+fn robust_driver_on_lgss_reaches_the_exact_em_estimate() {
+    use sysid::em::affine::{RobustOptions, StartStatus, fit_robust};
+    let truth = lgss();
+    let sim = System::Lgss.simulate(300, 8).unwrap();
+    let (affine, mut start) = LinearAffine::new(&truth).unwrap();
+    start.beta_x[(0, 0)] *= 0.4;
+    start.pi_x[(0, 0)] *= 5.0;
+    let spec = AffineEmSpec {
+        beta_y: false,
+        pi_y: Covariance::Fixed,
+        ..AffineEmSpec::default()
+    };
+    let exact = exact_affine_em(&affine, &sim.record, &start, &spec);
+    let y = sim.record.y.as_slice().to_vec();
+    let data = Series::new(&y, 1).unwrap();
+    let smoother = FfbsiReject {
+        paths: 200,
+        max_trials: None,
+        parallel: false,
+    };
+    let options = RobustOptions {
+        starts: 4,
+        explore_iterations: 20,
+        explore_particles: 100,
+        refine_iterations: 200,
+        refine_particles: 200,
+        ..RobustOptions::default()
+    };
+    let fit = |threads| {
+        common::on_threads(threads, || {
+            fit_robust(&affine, data, &start, &spec, &smoother, &options, 11).unwrap()
+        })
+    };
+    let one = fit(1);
+    eprintln!(
+        "robust A {} Q {} R {}; exact A {} Q {}; warnings {:?}",
+        one.estimate.beta_x[(0, 0)],
+        one.estimate.pi_x[(0, 0)],
+        one.estimate.pi_y[(0, 0)],
+        exact.beta_x[(0, 0)],
+        exact.pi_x[(0, 0)],
+        one.warnings
+    );
+    // the refinement's last half, as the driver averages it
+    let half = &one.refine_trace[one.refine_trace.len() / 2..];
+    for (name, get, value) in [
+        (
+            "A",
+            (|p: &sysid::em::affine::AffineParams| p.beta_x[(0, 0)]) as fn(&_) -> f64,
+            exact.beta_x[(0, 0)],
+        ),
+        ("Q", |p| p.pi_x[(0, 0)], exact.pi_x[(0, 0)]),
+    ] {
+        let values: Vec<f64> = half.iter().map(get).collect();
+        common::assert_iterates_match("robust particle EM", name, &values, value);
+    }
+    assert_eq!(one.estimate.pi_y, start.pi_y, "R held at the user's value");
+    assert_eq!(one.starts.len(), 4);
+    assert_eq!(
+        one.starts
+            .iter()
+            .filter(|s| s.status == StartStatus::Explored)
+            .count(),
+        1,
+        "one start wins the halving"
+    );
+    let two = fit(2);
+    assert_eq!(one.estimate, two.estimate, "1 and 2 threads");
+    assert_eq!(one.loglik.to_bits(), two.loglik.to_bits());
+    let refused = fit_robust(
+        &affine,
+        data,
+        &start,
+        &spec,
+        &smoother,
+        &RobustOptions {
+            starts: 0,
+            ..options
+        },
+        11,
+    );
+    assert!(refused.is_err(), "zero starts");
 }

@@ -63,6 +63,31 @@ pub enum Runner {
         /// JSON-lines files written by `nlbench-em --shard i/n`.
         files: Vec<std::path::PathBuf>,
     },
+    /// Draws seed 000's Figure 1 (a, b, c, d against the iteration, one line per run,
+    /// the truth dashed) from an `nlbench-em` output and its `--trace-out` file.
+    NlbenchEmFigure {
+        /// The runner's JSON lines (for each run's start).
+        #[arg(long)]
+        runs: std::path::PathBuf,
+        /// The runner's trajectories (`--trace-out`).
+        #[arg(long)]
+        trace: std::path::PathBuf,
+        /// Directory of the figure (STEM.svg, STEM.png).
+        #[arg(long)]
+        out_dir: std::path::PathBuf,
+        /// File stem.
+        #[arg(long, default_value = "nlbench-em")]
+        stem: String,
+        /// Title of the panels.
+        #[arg(long, default_value = "particle EM")]
+        title: String,
+        /// Draw the first this many runs.
+        #[arg(long, default_value_t = 50)]
+        max_runs: usize,
+        /// Replace an existing figure.
+        #[arg(long)]
+        force: bool,
+    },
     /// Runs every runner at a chosen scale and writes docs/benchmarks.md (tables,
     /// targets, floors, reproduction accuracy) and its figures.
     Report(report::Args),
@@ -98,6 +123,15 @@ pub fn run(runner: Runner) -> Result<(), String> {
         Runner::Wiener(args) => wiener::run(&args)?,
         Runner::NlbenchEm(args) => nlbench_em::run(&args)?,
         Runner::NlbenchEmMerge { files } => nlbench_em::merge(&files)?,
+        Runner::NlbenchEmFigure {
+            runs,
+            trace,
+            out_dir,
+            stem,
+            title,
+            max_runs,
+            force,
+        } => nlbench_em::figure(&runs, &trace, &out_dir, &stem, &title, max_runs, force)?,
         Runner::Report(args) => report::run(&args)?,
         Runner::Lti2x2 {
             datasets,

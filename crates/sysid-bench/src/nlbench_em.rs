@@ -10,10 +10,9 @@ use crate::emit;
 use rayon::prelude::*;
 use serde_json::json;
 use std::io::Write;
-use sysid::models::nlbench_study::{
-    NlbenchStudy, NoiseSetting, abcd, within_ten_percent as converged,
-};
-use sysid::models::{Nlbench, NlbenchParams};
+use sysid::em::affine::{RobustFit, RobustOptions, describe};
+use sysid::models::nlbench_study::{Method, NlbenchStudy, abcd, within_ten_percent as converged};
+use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
 use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki};
 
 /// The runner's settings (the `nlbench-em` command line).
@@ -46,11 +45,40 @@ pub struct Args {
     /// Replace an existing trace file.
     #[arg(long)]
     pub force: bool,
-    /// Noise variances q, r: `known` (the paper: only a, b, c, d estimated),
-    /// `estimated` (q and r start at 10 times their true values and are estimated) or
-    /// `q` (q starts at 100 times its true value and is estimated, r known).
-    #[arg(long, default_value = "known")]
-    pub noise: String,
+    /// How the runs fit: `paper` (the paper's Algorithm 2: q and r estimated from 10
+    /// times their true values), `held-noise` (a variant: q and r held at the truth),
+    /// `q` (a variant: q estimated from 100 times the truth, r held) or `robust` (the
+    /// robust driver, `sysid_em::affine::fit_robust`, with the options below).
+    #[arg(long, default_value = "paper")]
+    pub method: String,
+    /// robust: number of starts.
+    #[arg(long, default_value_t = RobustOptions::default().starts)]
+    pub starts: usize,
+    /// robust: EM iterations per start (at --particles).
+    #[arg(long, default_value_t = RobustOptions::default().explore_iterations)]
+    pub explore_iters: usize,
+    /// robust: EM iterations of the refinement.
+    #[arg(long, default_value_t = RobustOptions::default().refine_iterations)]
+    pub refine_iters: usize,
+    /// robust: particles of the refinement.
+    #[arg(long, default_value_t = RobustOptions::default().refine_particles)]
+    pub refine_particles: usize,
+    /// robust: particles of the filter that ranks the starts.
+    #[arg(long, default_value_t = RobustOptions::default().select_particles)]
+    pub select_particles: usize,
+    /// robust: half-width of the starts' multiplicative perturbation.
+    #[arg(long, default_value_t = RobustOptions::default().spread)]
+    pub spread: f64,
+    /// robust: factor on the noise variances at every start.
+    #[arg(long, default_value_t = RobustOptions::default().noise_inflation)]
+    pub inflation: f64,
+    /// robust: a process-noise variance above this factor times its start stops a
+    /// start as a runaway.
+    #[arg(long, default_value_t = RobustOptions::default().runaway_factor)]
+    pub runaway_factor: f64,
+    /// Start every run at the truth (the no-drift check) instead of a random start.
+    #[arg(long)]
+    pub at_truth: bool,
 }
 
 /// `i/n` as `(i, n)`.
@@ -83,20 +111,68 @@ struct RunResult {
     seconds: f64,
     /// (a, b, c, d) after each iteration
     trace: Vec<[f64; 4]>,
+    /// The robust driver's starts, maxima, warnings and timing.
+    robust: Option<serde_json::Value>,
 }
 
-fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<RunResult, String> {
-    let noise = match a.noise.as_str() {
-        "estimated" => NoiseSetting::Estimated,
-        "q" => NoiseSetting::ProcessOnly,
-        _ => NoiseSetting::Known,
+/// The `--method` option with the robust settings.
+fn method(a: &Args) -> Result<Method, String> {
+    Ok(match a.method.as_str() {
+        "paper" => Method::Paper,
+        "held-noise" => Method::HeldNoise,
+        "q" => Method::ProcessNoise,
+        "robust" => Method::Robust(RobustOptions {
+            starts: a.starts,
+            explore_iterations: a.explore_iters,
+            refine_iterations: a.refine_iters,
+            refine_particles: a.refine_particles,
+            select_particles: a.select_particles,
+            spread: a.spread,
+            noise_inflation: a.inflation,
+            runaway_factor: a.runaway_factor,
+            ..RobustOptions::default()
+        }),
+        other => {
+            return Err(format!(
+                "--method {other:?}: use paper, held-noise, q or robust"
+            ));
+        }
+    })
+}
+
+/// What the robust driver reports about a run.
+fn robust_json(fit: &RobustFit) -> serde_json::Value {
+    let params = |p: &sysid::em::affine::AffineParams| {
+        let n = NlbenchAffine::nlbench_params(p);
+        json!({"a": n.a, "b": n.b, "c": n.c, "d": n.d, "q": n.q, "r": n.r})
     };
+    json!({
+        "starts": fit.starts.iter().map(|o| json!({
+            "status": describe(&o.status), "loglik": o.loglik, "estimate": params(&o.estimate),
+        })).collect::<Vec<_>>(),
+        "maxima": fit.maxima.iter().map(|m| json!({
+            "loglik": m.loglik, "starts": m.starts, "estimate": params(&m.estimate),
+        })).collect::<Vec<_>>(),
+        "selected_loglik": fit.selected.loglik,
+        "refine_stop": format!("{:?}", fit.stop),
+        "warnings": fit.warnings,
+        "seconds": {"explore": fit.timing.explore.as_secs_f64(),
+            "select": fit.timing.select.as_secs_f64(), "refine": fit.timing.refine.as_secs_f64()},
+    })
+}
+
+fn run_one<S: Smoother<Nlbench> + Clone + Send + Sync>(
+    a: &Args,
+    run: usize,
+    smoother: S,
+) -> Result<RunResult, String> {
     let study = NlbenchStudy {
         seed: a.seed,
         steps: a.steps,
         particles: a.particles,
         iterations: a.iters,
-        noise,
+        method: method(a)?,
+        at_truth: a.at_truth,
     };
     let r = study
         .run(run, smoother, &mut ())
@@ -121,12 +197,20 @@ fn run_one<S: Smoother<Nlbench>>(a: &Args, run: usize, smoother: S) -> Result<Ru
         reference_truth: reference(NlbenchParams::TRUE),
         reference_start: reference(r.start),
         reference_final: reference(r.estimate),
-        iterations: r.em.iterations,
-        decreases: r.em.decreases,
-        final_loglik: r.em.loglik.unwrap_or(f64::NAN),
-        seconds: r.em.elapsed.as_secs_f64(),
+        iterations: r.iterations,
+        decreases: r.decreases,
+        final_loglik: r.loglik.unwrap_or(f64::NAN),
+        seconds: r.elapsed.as_secs_f64(),
+        robust: r.robust.as_ref().map(robust_json),
         trace: r.trajectory,
     })
+}
+
+/// Whether (a, b, c, d) are all within 10 % of the truth.
+fn inside_box(v: &[f64; 4]) -> bool {
+    v.iter()
+        .zip(abcd(&NlbenchParams::TRUE))
+        .all(|(x, t)| ((x - t) / t).abs() <= 0.1)
 }
 
 fn quantile(sorted: &[f64], q: f64) -> f64 {
@@ -137,9 +221,7 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 /// Runs the study and prints JSON lines.
 pub fn run(a: &Args) -> Result<(), String> {
-    if !["known", "estimated", "q"].contains(&a.noise.as_str()) {
-        return Err(format!("--noise {:?}: use known or estimated", a.noise));
-    }
+    method(a)?;
     if a.runs == 0 || a.iters == 0 || a.particles == 0 || a.steps < 2 {
         return Err("--runs, --iters and --particles must be >= 1 and --steps >= 2".into());
     }
@@ -193,7 +275,8 @@ pub fn run(a: &Args) -> Result<(), String> {
         .collect();
     let results: Vec<RunResult> = results.into_iter().collect::<Result<_, _>>()?;
     let params = json!({"T": a.steps, "M": a.particles, "iters": a.iters, "runs": a.runs,
-        "smoother": a.smoother, "seed": a.seed, "noise": a.noise, "shard": format!("{index}/{count}")});
+        "smoother": a.smoother, "seed": a.seed, "method": a.method, "at_truth": a.at_truth,
+        "shard": format!("{index}/{count}")});
     for r in &results {
         let [sa, sb, sc, sd] = abcd(&r.start);
         let [ea, eb, ec, ed] = abcd(&r.estimate);
@@ -202,11 +285,12 @@ pub fn run(a: &Args) -> Result<(), String> {
             "start": {"a": sa, "b": sb, "c": sc, "d": sd},
             "estimate": {"a": ea, "b": eb, "c": ec, "d": ed, "q": r.estimate.q, "r": r.estimate.r},
             "converged": converged(&r.estimate), "iterations": r.iterations,
+            "trajectory_inside_box": r.trace.iter().all(inside_box),
             "likelihood_decreases": r.decreases, "final_loglik": r.final_loglik,
             "reference_loglik": {"truth": r.reference_truth, "start": r.reference_start,
                 "final": r.reference_final,
                 "particles": REFERENCE_PARTICLES},
-            "seconds": r.seconds,
+            "seconds": r.seconds, "robust": r.robust,
         }));
     }
     if let Some(path) = &a.trace_out {
@@ -323,5 +407,77 @@ pub fn merge(files: &[std::path::PathBuf]) -> Result<(), String> {
         emit(v);
     }
     emit(&summary_json(&params, &estimates, &references, &seconds));
+    Ok(())
+}
+
+/// Seed 000's Figure 1 from a study's run lines (starts) and trajectories.
+pub fn figure(
+    runs_file: &std::path::Path,
+    trace_file: &std::path::Path,
+    out_dir: &std::path::Path,
+    stem: &str,
+    title: &str,
+    max_runs: usize,
+    force: bool,
+) -> Result<(), String> {
+    use sysid_plot::trajectories::{Run, parameter_trajectories};
+    let read = |p: &std::path::Path| {
+        std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))
+    };
+    let mut starts: std::collections::BTreeMap<u64, Vec<f64>> = Default::default();
+    for (k, line) in read(runs_file)?.lines().enumerate() {
+        let v: serde_json::Value = serde_json::from_str(line)
+            .map_err(|e| format!("{}, line {}: {e}", runs_file.display(), k + 1))?;
+        if v["task"] == "nlbench_em_run" {
+            let field = |p: &str| v["start"][p].as_f64().unwrap_or(f64::NAN);
+            let run = v["run"].as_u64().unwrap_or(u64::MAX);
+            starts.insert(run, ["a", "b", "c", "d"].map(field).to_vec());
+        }
+    }
+    let mut iterates: std::collections::BTreeMap<u64, Vec<Vec<f64>>> = Default::default();
+    for (k, line) in read(trace_file)?.lines().enumerate().skip(1) {
+        let values: Vec<f64> = line
+            .split(',')
+            .map(|f| f.parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| format!("{}, line {}: {e}", trace_file.display(), k + 1))?;
+        let [run, _, a, b, c, d] = values[..] else {
+            return Err(format!(
+                "{}, line {}: expected run,iteration,a,b,c,d",
+                trace_file.display(),
+                k + 1
+            ));
+        };
+        iterates
+            .entry(run as u64)
+            .or_default()
+            .push(vec![a, b, c, d]);
+    }
+    let bundle: Vec<Run<'_>> = iterates
+        .iter()
+        .filter_map(|(run, it)| {
+            starts.get(run).map(|start| Run {
+                start: start.clone(),
+                iterates: it,
+            })
+        })
+        .take(max_runs)
+        .collect();
+    if bundle.is_empty() {
+        return Err("no run has both a start and a trajectory".into());
+    }
+    let figure = parameter_trajectories(
+        title,
+        &["a", "b", "c", "d"],
+        &abcd(&NlbenchParams::TRUE),
+        &bundle,
+        "EM iteration",
+        500,
+    );
+    std::fs::create_dir_all(out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
+    let written = figure
+        .write(out_dir, stem, force)
+        .map_err(|e| e.to_string())?;
+    emit(&json!({"task": "nlbench_em_figure", "runs": bundle.len(), "written": written}));
     Ok(())
 }

@@ -325,40 +325,86 @@ fn demo_is_thread_independent() {
 /// for any thread count.
 #[test]
 fn bench_studies_are_thread_independent() {
-    let timing = |k: &str| k.contains("seconds") || k == "threads";
-    let mut reference: Option<Vec<serde_json::Value>> = None;
-    for threads in ["1", "2", "4"] {
-        let out = sysid(&[
-            "--threads",
-            threads,
-            "bench",
-            "nlbench-em",
-            "--runs",
-            "3",
-            "--iters",
-            "3",
-            "--steps",
-            "200",
-            "--particles",
-            "20",
-        ]);
+    // timings and thread counts differ; everything else must not, at any depth
+    fn strip(v: &mut serde_json::Value) {
+        if let Some(map) = v.as_object_mut() {
+            map.retain(|k, _| !(k.contains("seconds") || k == "threads" || k == "shard"));
+            map.values_mut().for_each(strip);
+        } else if let Some(list) = v.as_array_mut() {
+            list.iter_mut().for_each(strip);
+        }
+    }
+    let parse = |out: &std::process::Output| -> Vec<serde_json::Value> {
         assert!(
             out.status.success(),
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        String::from_utf8_lossy(&out.stdout)
             .lines()
             .map(|l| {
                 let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
-                v.as_object_mut().unwrap().retain(|k, _| !timing(k));
+                strip(&mut v);
                 v
             })
-            .collect();
-        assert_eq!(lines.len(), 4, "3 runs and a summary");
-        match &reference {
-            None => reference = Some(lines),
-            Some(first) => assert_eq!(first, &lines, "nlbench-em differs with {threads} threads"),
+            .collect()
+    };
+    let dir = scratch_dir();
+    for method in ["paper", "robust"] {
+        let study = |threads: &str, shard: &str| {
+            sysid(&[
+                "--threads",
+                threads,
+                "bench",
+                "nlbench-em",
+                "--method",
+                method,
+                "--runs",
+                "3",
+                "--iters",
+                "3",
+                "--steps",
+                "200",
+                "--particles",
+                "20",
+                "--starts",
+                "4",
+                "--explore-iters",
+                "3",
+                "--refine-iters",
+                "3",
+                "--refine-particles",
+                "20",
+                "--select-particles",
+                "100",
+                "--shard",
+                shard,
+            ])
+        };
+        let reference = parse(&study("1", "0/1"));
+        assert_eq!(reference.len(), 4, "3 runs and a summary");
+        for threads in ["2", "4"] {
+            assert_eq!(
+                reference,
+                parse(&study(threads, "0/1")),
+                "{method} differs with {threads} threads"
+            );
         }
+        // two shards, merged
+        let shards: Vec<std::path::PathBuf> = (0..2)
+            .map(|i| {
+                let out = study("2", &format!("{i}/2"));
+                let path = dir.join(format!("{method}-{i}.jsonl"));
+                std::fs::write(&path, &out.stdout).unwrap();
+                path
+            })
+            .collect();
+        let merged = parse(&sysid(&[
+            "bench",
+            "nlbench-em-merge",
+            s(&shards[0]),
+            s(&shards[1]),
+        ]));
+        assert_eq!(reference, merged, "{method}: merged shards differ");
     }
 }

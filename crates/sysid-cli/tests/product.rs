@@ -26,7 +26,7 @@ fn assert_figure(dir: &Path, stem: &str, labels: &[&str]) {
 }
 
 #[test]
-fn demo_prints_the_table_and_draws_the_four_figures() {
+fn demo_prints_the_table_and_draws_the_five_figures() {
     let dir = scratch_dir();
     let figures = dir.join("figures");
     let out = sysid(&[
@@ -58,7 +58,27 @@ fn demo_prints_the_table_and_draws_the_four_figures() {
     assert_figure(
         &figures,
         "em-trajectories",
-        &["parameter a", "parameter d", "EM iteration", "true b = 25"],
+        &[
+            "paper EM: a",
+            "paper EM: d",
+            "EM iteration",
+            "true b = 25",
+            "runs (one line each, 2)",
+        ],
+    );
+    assert_figure(
+        &figures,
+        "em-trajectories-robust",
+        &["robust EM: a", "refinement iteration", "true d = 0.05"],
+    );
+    let methods = v["nlbench_em"]["methods"].as_array().unwrap();
+    assert_eq!(methods[0]["method"], "paper");
+    assert_eq!(methods[1]["method"], "robust");
+    assert!(
+        v["nlbench_em"]["take_away"]
+            .as_str()
+            .unwrap()
+            .contains("sysid fit nlbench")
     );
     assert_figure(
         &figures,
@@ -119,7 +139,8 @@ fn demo_prints_the_table_and_draws_the_four_figures() {
     for needle in [
         "paper's initial model",
         "EM from N4SID",
-        "within 10 % of the truth: ",
+        "within 10%",
+        "take away: fit with the default `sysid fit nlbench` (robust)",
         "bode.png",
     ] {
         assert!(table.contains(needle), "{needle:?} missing from\n{table}");

@@ -11,22 +11,40 @@
 
 use crate::{Nlbench, NlbenchAffine, NlbenchParams};
 use rand::RngExt;
-use sysid_em::affine::{AffineEm, AffineEmError, AffineEmSpec, AffineParams};
+use sysid_em::affine::{
+    AffineEm, AffineEmError, AffineEmSpec, AffineParams, RobustFit, RobustOptions, fit_robust,
+};
 use sysid_em::linear::Covariance;
-use sysid_em::{EmObserver, EmOptions, EmResult, IterationInfo, OptionsError, run_em};
+use sysid_em::{EmObserver, EmOptions, IterationInfo, OptionsError, run_em};
 use sysid_smc::{Series, Smoother, stream};
 use thiserror::Error;
 
-/// Which noise variances a study estimates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum NoiseSetting {
-    /// The paper's setting: q and r known, only a, b, c, d estimated.
+/// How a study's runs fit the model.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Method {
+    /// The paper's Algorithm 2: theta = (beta, Pi) with q and r estimated, started at
+    /// 10 times their true values.
     #[default]
-    Known,
-    /// q and r start at 10 times their true values and are estimated.
-    Estimated,
-    /// q starts at 100 times its true value and is estimated; r known.
-    ProcessOnly,
+    Paper,
+    /// A variant: q and r held at their true values, only a, b, c, d estimated.
+    HeldNoise,
+    /// A variant: q started at 100 times its true value and estimated; r held.
+    ProcessNoise,
+    /// The robust driver ([`fit_robust`]) from the run's start with the true q and r
+    /// as the user's noise guess (inflated by the driver).
+    Robust(RobustOptions),
+}
+
+impl Method {
+    /// The method's name in the runner's output (`paper`, `held-noise`, `q`, `robust`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::Paper => "paper",
+            Method::HeldNoise => "held-noise",
+            Method::ProcessNoise => "q",
+            Method::Robust(_) => "robust",
+        }
+    }
 }
 
 /// The settings of a study.
@@ -38,10 +56,13 @@ pub struct NlbenchStudy {
     pub steps: usize,
     /// Particles M (the paper: 50).
     pub particles: usize,
-    /// EM iterations per run, all of them run (the paper: 1000).
+    /// EM iterations per run, all of them run (the paper: 1000; the robust method
+    /// uses its own counts).
     pub iterations: usize,
-    /// Which noise variances are estimated.
-    pub noise: NoiseSetting,
+    /// How the runs fit the model.
+    pub method: Method,
+    /// Start every run at the truth (the no-drift check).
+    pub at_truth: bool,
 }
 
 impl Default for NlbenchStudy {
@@ -52,7 +73,8 @@ impl Default for NlbenchStudy {
             steps: 1000,
             particles: 50,
             iterations: 1000,
-            noise: NoiseSetting::Known,
+            method: Method::Paper,
+            at_truth: false,
         }
     }
 }
@@ -81,10 +103,22 @@ pub struct NlbenchRun {
     pub start: NlbenchParams,
     /// The final estimate.
     pub estimate: NlbenchParams,
-    /// (a, b, c, d) after each iteration.
+    /// (a, b, c, d) after each iteration (robust: of the refinement).
     pub trajectory: Vec<[f64; 4]>,
-    /// The EM runner's result (log-likelihood trace, termination, time).
-    pub em: EmResult<AffineParams, AffineEmError>,
+    /// The final log-likelihood estimate: the last E-step's filter (EM), or the large
+    /// filter's at the averaged estimate (robust).
+    pub loglik: Option<f64>,
+    /// EM iterations made (robust: exploration and refinement together).
+    pub iterations: usize,
+    /// The E-steps' log-likelihood estimates, one per iteration (EM only; empty for
+    /// robust).
+    pub loglik_trace: Vec<f64>,
+    /// Iterations whose log-likelihood estimate decreased (EM only).
+    pub decreases: usize,
+    /// Wall-clock time of the fit.
+    pub elapsed: std::time::Duration,
+    /// The robust driver's whole result.
+    pub robust: Option<RobustFit>,
 }
 
 /// (a, b, c, d) of a parameter set.
@@ -125,6 +159,9 @@ impl NlbenchStudy {
         let mut rng = stream(self.run_seed(run, 1), 0);
         let mut factor = || rng.random_range(0.5..1.5);
         let truth = NlbenchParams::TRUE;
+        if self.at_truth {
+            return truth;
+        }
         let mut start = NlbenchParams {
             a: truth.a * factor(),
             b: truth.b * factor(),
@@ -132,46 +169,81 @@ impl NlbenchStudy {
             d: truth.d * factor(),
             ..truth
         };
-        match self.noise {
+        match self.method {
             // a deliberately loose start: EM shrinks q and r as the fit improves
-            NoiseSetting::Estimated => {
+            Method::Paper => {
                 start.q = 10.0 * truth.q;
                 start.r = 10.0 * truth.r;
             }
-            NoiseSetting::ProcessOnly => start.q = 100.0 * truth.q,
-            NoiseSetting::Known => {}
+            Method::ProcessNoise => start.q = 100.0 * truth.q,
+            // the robust driver inflates the noise itself
+            Method::HeldNoise | Method::Robust(_) => {}
         }
         start
     }
 
     /// Makes run `run` with the E-step smoother `smoother`; `observer` sees every
     /// iteration (progress bars, traces).
-    pub fn run<S: Smoother<Nlbench>>(
+    pub fn run<S: Smoother<Nlbench> + Clone + Send + Sync>(
         &self,
         run: usize,
         smoother: S,
         observer: &mut impl EmObserver<AffineParams>,
     ) -> Result<NlbenchRun, StudyError> {
-        let options = EmOptions {
-            max_iterations: self.iterations,
-            tol: 0.0,
-            ..EmOptions::default()
-        }
-        .check()?;
         let simulation = Nlbench::truth().simulate(self.steps, self.run_seed(run, 0));
         let data = Series::new(&simulation.outputs, 1).map_err(AffineEmError::from)?;
         let start = self.start(run);
-        let (pi_x, pi_y) = match self.noise {
-            NoiseSetting::Known => (Covariance::Fixed, Covariance::Fixed),
-            NoiseSetting::Estimated => (Covariance::Diagonal, Covariance::Diagonal),
-            NoiseSetting::ProcessOnly => (Covariance::Diagonal, Covariance::Fixed),
+        let model = NlbenchAffine;
+        let (pi_x, pi_y) = match self.method {
+            Method::HeldNoise => (Covariance::Fixed, Covariance::Fixed),
+            Method::Paper | Method::Robust(_) => (Covariance::Diagonal, Covariance::Diagonal),
+            Method::ProcessNoise => (Covariance::Diagonal, Covariance::Fixed),
         };
         let spec = AffineEmSpec {
             pi_x,
             pi_y,
             ..AffineEmSpec::default()
         };
-        let model = NlbenchAffine;
+        if let Method::Robust(options) = self.method {
+            let began = std::time::Instant::now();
+            let fit = fit_robust(
+                &model,
+                data,
+                &NlbenchAffine::params(&start),
+                &spec,
+                &smoother,
+                &RobustOptions {
+                    explore_particles: self.particles,
+                    ..options
+                },
+                self.run_seed(run, 2),
+            )?;
+            let trajectory = fit
+                .refine_trace
+                .iter()
+                .map(|p| abcd(&NlbenchAffine::nlbench_params(p)))
+                .collect();
+            return Ok(NlbenchRun {
+                run,
+                estimate: NlbenchAffine::nlbench_params(&fit.estimate),
+                start,
+                trajectory,
+                states: simulation.states,
+                outputs: simulation.outputs,
+                loglik: Some(fit.loglik),
+                iterations: options.starts * options.explore_iterations + options.refine_iterations,
+                decreases: 0,
+                loglik_trace: Vec::new(),
+                elapsed: began.elapsed(),
+                robust: Some(fit),
+            });
+        }
+        let options = EmOptions {
+            max_iterations: self.iterations,
+            tol: 0.0,
+            ..EmOptions::default()
+        }
+        .check()?;
         let mut em = AffineEm::new(
             &model,
             data,
@@ -197,7 +269,12 @@ impl NlbenchStudy {
             trajectory: recorder.trajectory,
             states: simulation.states,
             outputs: simulation.outputs,
-            em: result,
+            loglik: result.loglik,
+            iterations: result.iterations,
+            decreases: result.decreases,
+            loglik_trace: result.trace,
+            elapsed: result.elapsed,
+            robust: None,
         })
     }
 }

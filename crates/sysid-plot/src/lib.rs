@@ -37,6 +37,7 @@
 
 mod draw;
 mod output;
+pub mod trajectories;
 
 pub use output::{PendingFile, PlotError, write_atomically};
 

@@ -17,17 +17,17 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use sysid::em::EmOptions;
+use sysid::em::affine::RobustOptions;
 use sysid::em::linear::fit;
 use sysid::kalman::{KalmanWorkspace, LinearGaussianModel};
-use sysid::models::nlbench_study::{
-    NlbenchRun, NlbenchStudy, NoiseSetting, abcd, within_ten_percent,
-};
+use sysid::models::nlbench_study::{Method, NlbenchRun, NlbenchStudy, abcd, within_ten_percent};
 use sysid::models::{
     Nlbench, NlbenchParams, System, lti2x2, lti2x2_em_spec, lti2x2_experiment_start,
     lti2x2_paper_start,
 };
 use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
+use sysid_plot::trajectories::{Run, parameter_trajectories};
 use sysid_plot::{Band, Figure, Panel, Scale, Series as Curve, Stroke};
 
 /// Options of `sysid demo`.
@@ -73,7 +73,13 @@ impl Default for Options {
 }
 
 /// The figures, by file stem.
-const FIGURES: [&str; 4] = ["em-trajectories", "bode", "smoothed-state", "loglik-trace"];
+const FIGURES: [&str; 5] = [
+    "em-trajectories",
+    "em-trajectories-robust",
+    "bode",
+    "smoothed-state",
+    "loglik-trace",
+];
 
 /// Length of the seed-004 data set, EM limits (ALGORITHMS.md 1.5, the `lti2x2` runner).
 const LTI_STEPS: usize = 200;
@@ -186,16 +192,26 @@ fn particle_part(
     runs: usize,
     json: bool,
 ) -> Result<Vec<NlbenchRun>, CliError> {
-    let progress = Progress::new((runs * study.iterations) as u64, "nlbench EM", json);
+    let robust = matches!(study.method, Method::Robust(_));
+    let (total, label) = if robust {
+        (runs as u64, "nlbench robust EM (runs)")
+    } else {
+        ((runs * study.iterations) as u64, "nlbench paper EM")
+    };
+    let progress = Progress::new(total, label, json);
     let results: Vec<NlbenchRun> = (0..runs)
         .into_par_iter()
         .map(|run| {
-            study
+            let result = study
                 .run(run, Tanizaki::default(), &mut progress.clone())
                 .map_err(|e| CliError::BadOption {
                     option: "demo",
                     message: format!("nlbench run {run}: {e}"),
-                })
+                });
+            if robust {
+                progress.inc(1);
+            }
+            result
         })
         .collect::<Result<_, _>>()?;
     progress.finish();
@@ -206,7 +222,7 @@ fn particle_part(
 fn best_run(runs: &[NlbenchRun]) -> &NlbenchRun {
     runs.iter()
         .max_by(|a, b| {
-            let l = |r: &NlbenchRun| r.em.loglik.unwrap_or(f64::NEG_INFINITY);
+            let l = |r: &NlbenchRun| r.loglik.unwrap_or(f64::NEG_INFINITY);
             l(a).total_cmp(&l(b))
         })
         .expect("at least one run")
@@ -333,40 +349,44 @@ fn bundle_member(k: usize, points: Vec<(f64, f64)>) -> Curve {
     }
 }
 
+/// Seed 000's Figure 1 for a set of runs.
+fn trajectory_figure(title: &str, runs: &[NlbenchRun], x_label: &str) -> Figure {
+    let iterates: Vec<Vec<Vec<f64>>> = runs
+        .iter()
+        .map(|r| r.trajectory.iter().map(|v| v.to_vec()).collect())
+        .collect();
+    let bundle: Vec<Run<'_>> = runs
+        .iter()
+        .zip(&iterates)
+        .map(|(r, it)| Run {
+            start: abcd(&r.start).to_vec(),
+            iterates: it,
+        })
+        .collect();
+    parameter_trajectories(
+        title,
+        &["a", "b", "c", "d"],
+        &abcd(&NlbenchParams::TRUE),
+        &bundle,
+        x_label,
+        1000,
+    )
+}
+
 fn figures(
     linear: &LinearPart,
     runs: &[NlbenchRun],
+    robust: &[NlbenchRun],
     best: &NlbenchRun,
     smoothed: &[(f64, f64, f64)],
     shown_steps: usize,
 ) -> Vec<(&'static str, Figure)> {
-    let names = ["a", "b", "c", "d"];
-    let truth = abcd(&NlbenchParams::TRUE);
-    let iterations = runs.first().map_or(0, |r| r.trajectory.len());
-    let trajectories = (0..4)
-        .map(|p| {
-            let mut panel = Panel::new(format!("parameter {}", names[p]), "EM iteration", names[p]);
-            for (k, run) in runs.iter().enumerate() {
-                let points = std::iter::once((0.0, abcd(&run.start)[p]))
-                    .chain(
-                        run.trajectory
-                            .iter()
-                            .enumerate()
-                            .map(|(k, v)| ((k + 1) as f64, v[p])),
-                    )
-                    .collect();
-                panel = panel.with_series(bundle_member(k, points));
-            }
-            panel.with_series(
-                Curve::line(
-                    format!("true {} = {}", names[p], truth[p]),
-                    vec![(0.0, truth[p]), (iterations as f64, truth[p])],
-                )
-                .stroke(Stroke::Dashed)
-                .colour(6),
-            )
-        })
-        .collect();
+    let trajectories = trajectory_figure("paper EM", runs, "EM iteration");
+    let robust_trajectories = trajectory_figure(
+        "robust EM",
+        robust,
+        "refinement iteration (0: the start of the run)",
+    );
     let band: Vec<(f64, f64, f64)> = smoothed
         .iter()
         .take(shown_steps)
@@ -445,8 +465,7 @@ fn figures(
     for run in runs {
         // from the first iterate on, as above
         let points = run
-            .em
-            .trace
+            .loglik_trace
             .iter()
             .enumerate()
             .skip(1)
@@ -455,7 +474,8 @@ fn figures(
         particle_trace = particle_trace.with_series(bundle_member(run.run, points));
     }
     vec![
-        ("em-trajectories", Figure::grid(trajectories, 2)),
+        ("em-trajectories", trajectories),
+        ("em-trajectories-robust", robust_trajectories),
         ("bode", Figure::grid(bode_panels(&linear.rows), 2)),
         ("smoothed-state", Figure::single(states)),
         (
@@ -497,30 +517,43 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let study = NlbenchStudy {
         seed: o.seed,
         iterations,
-        noise: NoiseSetting::Known,
+        method: Method::Paper,
         ..NlbenchStudy::default()
     };
     let t0 = Instant::now();
     let results = particle_part(&study, runs, o.json)?;
     let particle_seconds = t0.elapsed().as_secs_f64();
-    let best = best_run(&results);
+    // the same runs (data sets and starts) by the robust driver, refined for as many
+    // iterations as the paper's runs make (at most its default 600; a tiny --iters
+    // shortens its exploration too)
+    let robust_study = NlbenchStudy {
+        method: Method::Robust(RobustOptions {
+            refine_iterations: iterations.min(RobustOptions::default().refine_iterations),
+            explore_iterations: iterations.min(RobustOptions::default().explore_iterations),
+            ..RobustOptions::default()
+        }),
+        ..study
+    };
+    let t0 = Instant::now();
+    let robust = particle_part(&robust_study, runs, o.json)?;
+    let robust_seconds = t0.elapsed().as_secs_f64();
+    let best = best_run(&robust);
     let smoothed = smoothed_state(best, o.seed)?;
     std::fs::create_dir_all(&dir).map_err(|source| CliError::Io {
         path: dir.clone(),
         source,
     })?;
     let mut written = Vec::new();
-    for (stem, figure) in figures(&linear, &results, best, &smoothed, 100) {
+    for (stem, figure) in figures(&linear, &results, &robust, best, &smoothed, 100) {
         written.extend(figure.write(&dir, stem, overwrite)?);
     }
     let total = started.elapsed().as_secs_f64();
     report(
         o,
         &linear,
-        &results,
+        &[(&results, particle_seconds), (&robust, robust_seconds)],
         &Timings {
             linear_seconds,
-            particle_seconds,
             total,
         },
         &written,
@@ -530,31 +563,58 @@ pub fn run(o: &Options) -> Result<(), CliError> {
 
 struct Timings {
     linear_seconds: f64,
-    particle_seconds: f64,
     total: f64,
+}
+
+/// One method's summary: the runs within 10 % of the truth, the median estimates and
+/// the median time per run.
+struct MethodSummary {
+    name: &'static str,
+    converged: usize,
+    runs: usize,
+    medians: [f64; 4],
+    seconds_per_run: f64,
+    seconds: f64,
+}
+
+fn summarise(name: &'static str, results: &[NlbenchRun], seconds: f64) -> MethodSummary {
+    let column = |p: usize| results.iter().map(|r| abcd(&r.estimate)[p]).collect();
+    MethodSummary {
+        name,
+        converged: results
+            .iter()
+            .filter(|r| within_ten_percent(&r.estimate))
+            .count(),
+        runs: results.len(),
+        medians: [0, 1, 2, 3].map(|p| median(column(p))),
+        seconds_per_run: median(results.iter().map(|r| r.elapsed.as_secs_f64()).collect()),
+        seconds,
+    }
 }
 
 fn report(
     o: &Options,
     linear: &LinearPart,
-    results: &[NlbenchRun],
+    methods: &[(&[NlbenchRun], f64)],
     t: &Timings,
     written: &[PathBuf],
 ) {
     let names = ["a", "b", "c", "d"];
     let truth = abcd(&NlbenchParams::TRUE);
-    let column = |p: usize| {
-        results
-            .iter()
-            .map(|r| abcd(&r.estimate)[p])
-            .collect::<Vec<f64>>()
+    let [(paper, paper_seconds), (robust, robust_seconds)] = methods else {
+        unreachable!("the demo runs the paper's method and the robust one")
     };
-    let converged = results
-        .iter()
-        .filter(|r| within_ten_percent(&r.estimate))
-        .count();
-    let seconds_per_run = median(results.iter().map(|r| r.em.elapsed.as_secs_f64()).collect());
-    let iterations = results.first().map_or(0, |r| r.trajectory.len());
+    let summaries = [
+        summarise("paper", paper, *paper_seconds),
+        summarise("robust", robust, *robust_seconds),
+    ];
+    let iterations = paper.first().map_or(0, |r| r.trajectory.len());
+    let study = NlbenchStudy::default();
+    let takeaway = format!(
+        "take away: fit with the default `sysid fit nlbench` (robust): {}/{} runs within 10 % \
+         of the truth, against {}/{} for one run of the paper's EM from the same starts",
+        summaries[1].converged, summaries[1].runs, summaries[0].converged, summaries[0].runs
+    );
     if o.json {
         let rows: Vec<serde_json::Value> = linear
             .rows
@@ -562,23 +622,33 @@ fn report(
             .map(|r| serde_json::json!({"model": r.name, "loglik": r.loglik, "response_error": r.response_error,
                 "iterations": r.iterations, "seconds": r.seconds}))
             .collect();
-        let estimates: serde_json::Map<String, serde_json::Value> = (0..4)
-            .map(|p| {
-                (
-                    names[p].to_string(),
-                    serde_json::json!({"truth": truth[p], "median": median(column(p))}),
-                )
+        let methods: Vec<serde_json::Value> = summaries
+            .iter()
+            .map(|m| {
+                let estimates: serde_json::Map<String, serde_json::Value> = (0..4)
+                    .map(|p| {
+                        (
+                            names[p].to_string(),
+                            serde_json::json!({"truth": truth[p], "median": m.medians[p]}),
+                        )
+                    })
+                    .collect();
+                serde_json::json!({"method": m.name, "runs": m.runs,
+                    "within_10_percent": m.converged, "estimates": estimates,
+                    "seconds_per_run_median": m.seconds_per_run, "seconds": m.seconds})
             })
             .collect();
-        crate::say(&serde_json::json!({
-            "command": "demo",
-            "lti2x2": {"T": LTI_STEPS, "loglik_true": linear.loglik_true, "models": rows},
-            "nlbench_em": {"runs": results.len(), "iterations": iterations, "T": NlbenchStudy::default().steps,
-                "M": NlbenchStudy::default().particles, "smoother": "tanizaki", "estimates": estimates,
-                "within_10_percent": converged, "seconds_per_run_median": seconds_per_run,
-                "seconds": t.particle_seconds},
-            "figures": written, "seconds": t.total,
-        }).to_string());
+        crate::say(
+            &serde_json::json!({
+                "command": "demo",
+                "lti2x2": {"T": LTI_STEPS, "loglik_true": linear.loglik_true, "models": rows},
+                "nlbench_em": {"runs": paper.len(), "iterations": iterations, "T": study.steps,
+                    "M": study.particles, "smoother": "tanizaki", "methods": methods,
+                    "take_away": takeaway},
+                "figures": written, "seconds": t.total,
+            })
+            .to_string(),
+        );
         return;
     }
     let mut out = Vec::new();
@@ -606,34 +676,43 @@ fn report(
             .into(),
     );
     out.push(String::new());
-    let study = NlbenchStudy::default();
     out.push(format!(
-        "seed 000: nlbench particle EM, {} runs x {iterations} iterations, T = {}, M = {}, Tanizaki smoother ({:.1} s)",
-        results.len(), study.steps, study.particles, t.particle_seconds
+        "seed 000: nlbench particle EM, {} runs (each its own data set, T = {}, and start: a, b, c, d \
+         times U[0.5, 1.5]), M = {}, Tanizaki smoother",
+        paper.len(),
+        study.steps,
+        study.particles
     ));
     out.push(format!(
-        "  {:<10} {:>8} {:>9} {:>9} {:>9} {:>9}",
-        "parameter", "truth", "start", "median", "q25", "q75"
+        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
+        "method", "within 10%", "a", "b", "c", "d", "s/run", "total s"
     ));
-    for p in 0..4 {
-        let mut v = column(p);
-        v.sort_by(f64::total_cmp);
-        let q = |f: f64| v[((f * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
-        let start = median(results.iter().map(|r| abcd(&r.start)[p]).collect());
+    out.push(format!(
+        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>9}",
+        "truth",
+        "",
+        fmt(truth[0]),
+        fmt(truth[1]),
+        fmt(truth[2]),
+        fmt(truth[3])
+    ));
+    for m in &summaries {
         out.push(format!(
-            "  {:<10} {:>8} {:>9} {:>9} {:>9} {:>9}",
-            names[p],
-            fmt(truth[p]),
-            format!("{start:.4}"),
-            format!("{:.4}", median(v.clone())),
-            format!("{:.4}", q(0.25)),
-            format!("{:.4}", q(0.75))
+            "  {:<8} {:>11} {:>9.4} {:>9.3} {:>9.3} {:>9.4} {:>9.1} {:>9.1}",
+            m.name,
+            format!("{}/{}", m.converged, m.runs),
+            m.medians[0],
+            m.medians[1],
+            m.medians[2],
+            m.medians[3],
+            m.seconds_per_run,
+            m.seconds
         ));
     }
     out.push(format!(
-        "  runs with every estimate within 10 % of the truth: {converged}/{}; median {:.1} s per run, {} threads",
-        results.len(),
-        seconds_per_run,
+        "  (medians of the estimates; paper: q and r estimated from 10 times the truth, \
+         {iterations} iterations; robust: 8 starts, the best refined, docs/particle-em.md; \
+         {} threads)",
         crate::threads()
     ));
     if !o.full {
@@ -642,6 +721,7 @@ fn report(
                 .into(),
         );
     }
+    out.push(format!("  {takeaway}"));
     out.push(String::new());
     out.push(format!(
         "figures ({}):",

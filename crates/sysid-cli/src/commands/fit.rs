@@ -151,17 +151,26 @@ pub struct Options {
     /// peaked).
     #[arg(long, default_value = "tanizaki")]
     pub smoother: String,
-    /// Particle fits: `em` (particle EM with --smoother, seed 000) or `psaem`
-    /// (stochastic-approximation EM with a conditional particle filter with ancestor
-    /// sampling, Lindsten 2013; 15 particles are usually enough).
-    #[arg(long, default_value = "em")]
+    /// Particle fits: `robust` (the default: several starts around --init explored
+    /// with the noise estimated from an inflated value, the best by a 1000-particle
+    /// log-likelihood refined with --particles for --max-iter iterations and averaged;
+    /// docs/particle-em.md), `em` (one run of particle EM from --init, seed 000's
+    /// algorithm) or `psaem` (stochastic-approximation EM with a conditional particle
+    /// filter with ancestor sampling, Lindsten 2013; 15 particles are usually enough).
+    #[arg(long, default_value = "robust")]
     pub method: String,
+    /// Particle fits with `--method robust`: the number of starts (--init and
+    /// perturbations of it, each coefficient times U[0.5, 1.5]).
+    #[arg(long, default_value_t = 8)]
+    pub starts: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Particle EM and PSAEM: also estimate the noise covariances (else held at their
-    /// start): `--estimate-noise` both, `--estimate-noise=q` the process noise only,
-    /// `--estimate-noise=r` the output noise only. At a small process noise (nlbench's
+    /// Particle fits: which noise covariances are estimated: `--estimate-noise` (or
+    /// `=both`) both, `=q` the process noise only, `=r` the output noise only, `=none`
+    /// neither (held at --init's values). Default: both for `--method robust` (which
+    /// explores with both estimated anyway and holds a noise the user keeps only in its
+    /// refinement), none for `em` and `psaem`. At a small process noise (nlbench's
     /// q = 0.01), estimating q is what lets the particle kernel move the trajectory.
     #[arg(
         long,
@@ -169,7 +178,7 @@ pub struct Options {
         num_args = 0..=1,
         require_equals = true,
         default_missing_value = "both",
-        value_parser = ["q", "r", "both"]
+        value_parser = ["q", "r", "both", "none"]
     )]
     pub estimate_noise: Option<String>,
     /// Linear EM: stop when the estimated distance to the maximum of the

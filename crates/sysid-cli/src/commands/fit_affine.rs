@@ -17,7 +17,8 @@ use crate::error::CliError;
 use crate::files::{DataFile, read_model, write_output};
 use std::path::Path;
 use sysid::em::affine::{
-    AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, Psaem, StepSizes,
+    AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, Psaem, RobustOptions,
+    StartStatus, StepSizes, describe, fit_robust,
 };
 use sysid::em::linear::Covariance;
 use sysid::em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
@@ -142,9 +143,16 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
     };
     super::check_column_counts(&file, 0, outputs)?;
     let job = Job { o, file, options };
-    let free = |which: &str| match o.estimate_noise.as_deref() {
-        Some(w) if w == which || w == "both" => Covariance::Full,
-        _ => Covariance::Fixed,
+    let estimated = o
+        .estimate_noise
+        .as_deref()
+        .unwrap_or(if o.method == "robust" { "both" } else { "none" });
+    let free = |which: &str| {
+        if estimated == which || estimated == "both" {
+            Covariance::Full
+        } else {
+            Covariance::Fixed
+        }
     };
     let spec = AffineEmSpec {
         pi_x: free("q"),
@@ -185,6 +193,7 @@ where
     let series = series_of(&job.file, &context)?;
     match o.method.as_str() {
         "em" => {}
+        "robust" => return fit_robust_with(job, model, start, spec, &series, row),
         "psaem" => {
             let psaem = Psaem::new(
                 model,
@@ -200,7 +209,7 @@ where
         other => {
             return Err(bad(
                 "--method",
-                format!("unknown method {other:?} (known: em, psaem)"),
+                format!("unknown method {other:?} (known: robust, em, psaem)"),
             ));
         }
     }
@@ -361,5 +370,158 @@ where
             )
         },
     );
+    Ok(())
+}
+
+/// `--method robust`: [`fit_robust`] with the command's smoother, starts, refinement
+/// particles and iterations; writes the estimate with the starts' table, the trace of
+/// the refinement, and reports the warnings.
+fn fit_robust_with<A, F>(
+    job: &Job,
+    model: &A,
+    start: AffineParams,
+    spec: AffineEmSpec,
+    series: &sysid::smc::Series<'_>,
+    row: F,
+) -> Result<(), CliError>
+where
+    A: AffineModel + ParamNames,
+    A::Smc: sysid::smc::TransitionBound,
+    F: Fn(&AffineParams) -> Vec<f64>,
+{
+    let o = job.o;
+    let context = o.data.data.display().to_string();
+    if o.starts == 0 {
+        return Err(bad("--starts", "must be at least 1"));
+    }
+    let options = RobustOptions {
+        starts: o.starts,
+        refine_iterations: o.max_iter,
+        refine_particles: o.particles.max(2),
+        explore_particles: (o.particles / 2).max(2),
+        ..RobustOptions::default()
+    };
+    let began = std::time::Instant::now();
+    let fit = match o.smoother.as_str() {
+        "tanizaki" => fit_robust(
+            model,
+            *series,
+            &start,
+            &spec,
+            &Tanizaki::default(),
+            &options,
+            o.seed,
+        ),
+        "ffbsi-reject" => {
+            let smoother = FfbsiReject {
+                paths: o.particles,
+                max_trials: None,
+                parallel: false,
+            };
+            fit_robust(model, *series, &start, &spec, &smoother, &options, o.seed)
+        }
+        other => {
+            return Err(bad(
+                "--smoother",
+                format!("unknown smoother {other:?} (known: tanizaki, ffbsi-reject)"),
+            ));
+        }
+    }
+    .map_err(affine_error(&context))?;
+    let seconds = began.elapsed().as_secs_f64();
+    let names = model.names(&start);
+    let named = |p: &AffineParams| -> serde_json::Value {
+        names
+            .iter()
+            .cloned()
+            .zip(row(p))
+            .map(|(n, v)| (n, serde_json::json!(v)))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    };
+    let starts: Vec<serde_json::Value> = fit
+        .starts
+        .iter()
+        .map(|s| {
+            serde_json::json!({
+                "status": describe(&s.status), "loglik": s.loglik, "iterations": s.iterations,
+                "start": named(&s.start), "estimate": named(&s.estimate),
+            })
+        })
+        .collect();
+    let maxima: Vec<serde_json::Value> = fit
+        .maxima
+        .iter()
+        .map(|m| serde_json::json!({"loglik": m.loglik, "starts": m.starts, "estimate": named(&m.estimate)}))
+        .collect();
+    let (settled, change) = match fit.stop {
+        sysid::em::affine::RefineStop::Settled { change } => (true, change),
+        sysid::em::affine::RefineStop::StillMoving { change } => (false, change),
+    };
+    let summary = serde_json::json!({
+        "method": "robust", "seed": o.seed, "smoother": o.smoother,
+        "loglik": fit.loglik, "loglik_particles": options.select_particles,
+        "starts": starts, "local_maxima": maxima,
+        "refinement": {"iterations": fit.refine_trace.len(), "particles": options.refine_particles,
+            "averaged_last": fit.refine_trace.len() - fit.refine_trace.len() / 2,
+            "settled": settled, "largest_change_last_quarters": change},
+        "warnings": fit.warnings,
+    });
+    let mut json = model.model_json(&fit.estimate)?;
+    if json.get("system").is_some() {
+        json["particle_em"] = summary.clone();
+    }
+    let mut outputs = vec![(
+        o.out.clone(),
+        serde_json::to_string_pretty(&json).expect("serialises") + "\n",
+    )];
+    if let Some(path) = &o.trace {
+        let mut text = format!("iteration,loglik,{}\n", names.join(","));
+        for (k, (p, l)) in fit.refine_trace.iter().zip(&fit.refine_loglik).enumerate() {
+            let values: Vec<String> = row(p).iter().map(|v| v.to_string()).collect();
+            text += &format!("{},{l},{}\n", k + 1, values.join(","));
+        }
+        outputs.push((path.clone(), text));
+    }
+    for (path, text) in &outputs {
+        write_output(path, o.force, text)?;
+    }
+    for w in &fit.warnings {
+        crate::warn(w);
+    }
+    // the model file is the same on any machine; the timing goes to the report only
+    let mut report = summary;
+    report["seconds"] = serde_json::json!({
+        "explore": fit.timing.explore.as_secs_f64(), "select": fit.timing.select.as_secs_f64(),
+        "refine": fit.timing.refine.as_secs_f64(), "total": seconds,
+    });
+    report["command"] = serde_json::json!("fit");
+    report["out"] = serde_json::json!(o.out);
+    crate::report(o.json, report, || {
+        let mut text = format!(
+            "robust particle EM: {} starts, the best refined for {} iterations ({} particles) \
+             in {seconds:.2} s; log-likelihood {:.2} ({} particles); wrote {}\n  start  status                     log-likelihood",
+            o.starts,
+            fit.refine_trace.len(),
+            options.refine_particles,
+            fit.loglik,
+            options.select_particles,
+            o.out.display()
+        );
+        for (k, s) in fit.starts.iter().enumerate() {
+            let mark = if s.status == StartStatus::Explored {
+                "*"
+            } else {
+                " "
+            };
+            text += &format!(
+                "\n  {:>4}{mark} {:<26} {}",
+                k + 1,
+                describe(&s.status),
+                s.loglik.map_or("-".into(), |l| format!("{l:.2}"))
+            );
+        }
+        text
+    });
     Ok(())
 }

@@ -29,11 +29,16 @@ mod model;
 mod moments;
 mod mstep;
 mod psaem;
+mod robust;
 mod stats;
 
 pub use model::{AffineModel, AffineParams};
 pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
+pub use robust::{
+    LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome, StartStatus,
+    describe, fit_robust,
+};
 pub use stats::{AffineStatistics, StatisticsCollector};
 
 use crate::EmAlgorithm;

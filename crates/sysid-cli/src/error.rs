@@ -12,6 +12,8 @@ pub enum CliError {
     },
     #[error("{path}: refusing to overwrite an existing file (use --force)")]
     WouldOverwrite { path: PathBuf },
+    #[error("{path}: given for two outputs of this command; choose a file for each")]
+    SameOutput { path: PathBuf },
     /// EM could not evaluate its start (e.g. a start with a singular `R` on
     /// noise-free data); nothing was written.
     #[error("fit: {message}")]

@@ -15,20 +15,47 @@ pub fn create_output(path: &Path, force: bool) -> Result<PendingFile, CliError> 
     Ok(PendingFile::create(path, force)?)
 }
 
-/// Refuses, before any work, outputs that exist when `force` is not given (the final
-/// write checks again, atomically, through [`create_output`]).
+/// Checks a command's outputs before any work: one file given for two outputs, an
+/// existing path that is not a regular file (a directory, device, fifo or symbolic
+/// link such as `/dev/stdout`), and, without `force`, an existing file are refused, so a refused command writes nothing (the final write checks
+/// again, atomically, through [`create_output`]).
 pub fn refuse_existing<'a>(
     paths: impl IntoIterator<Item = &'a Path>,
     force: bool,
 ) -> Result<(), CliError> {
-    if force {
-        return Ok(());
+    let paths: Vec<&Path> = paths.into_iter().collect();
+    let identities: Vec<std::path::PathBuf> = paths.iter().map(|p| identity(p)).collect();
+    for (i, id) in identities.iter().enumerate() {
+        if identities[..i].contains(id) {
+            return Err(CliError::SameOutput {
+                path: paths[i].to_path_buf(),
+            });
+        }
     }
-    match paths.into_iter().find(|p| p.exists()) {
-        Some(path) => Err(CliError::WouldOverwrite {
-            path: path.to_path_buf(),
-        }),
-        None => Ok(()),
+    for path in paths {
+        if !sysid_plot::is_replaceable(path) {
+            return Err(CliError::Plot(sysid_plot::PlotError::NotAFile {
+                path: path.to_path_buf(),
+            }));
+        }
+        if !force && path.exists() {
+            return Err(CliError::WouldOverwrite {
+                path: path.to_path_buf(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The file a path names, for telling two spellings of one file apart: the canonical
+/// form of its directory (when it exists) joined with its name.
+fn identity(path: &Path) -> std::path::PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    match (absolute.parent(), absolute.file_name()) {
+        (Some(dir), Some(name)) => std::fs::canonicalize(dir)
+            .map(|d| d.join(name))
+            .unwrap_or(absolute),
+        _ => absolute,
     }
 }
 

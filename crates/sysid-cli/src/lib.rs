@@ -19,6 +19,7 @@ mod error;
 mod files;
 pub mod fuzzing;
 mod progress;
+mod resources;
 
 use clap::{Args, Parser, Subcommand};
 use error::CliError;
@@ -255,6 +256,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 option: "--threads",
                 message: "must be at least 1".into(),
             });
+        }
+        let (threads, capped) = resources::capped_threads(threads);
+        if let Some(note) = capped {
+            warn(&note);
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

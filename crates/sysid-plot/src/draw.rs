@@ -76,13 +76,28 @@ pub fn png(figure: &Figure, target: &Path, overwrite: bool) -> Result<(), PlotEr
 }
 
 /// Every panel has something to draw.
+/// Every panel has something to draw, on axes that are not too wide (the tick search
+/// of a range near `f64::MAX` does not end).
 fn check_data(figure: &Figure) -> Result<(), PlotError> {
-    match figure.panels.iter().find(|p| ranges(p).is_none()) {
-        Some(panel) => Err(PlotError::NoData {
-            panel: panel.title.clone(),
-        }),
-        None => Ok(()),
+    for panel in &figure.panels {
+        let Some((x, y)) = ranges(panel) else {
+            return Err(PlotError::NoData {
+                panel: panel.title.clone(),
+            });
+        };
+        for (axis, (lo, hi)) in [(&panel.x_label, x), (&panel.y_label, y)] {
+            let width = hi - lo;
+            if !(width.is_finite() && width <= MAX_WIDTH) {
+                return Err(PlotError::TooWide {
+                    panel: panel.title.clone(),
+                    axis: axis.clone(),
+                    lo,
+                    hi,
+                });
+            }
+        }
     }
+    Ok(())
 }
 
 fn draw_figure<DB: DrawingBackend>(
@@ -126,6 +141,9 @@ fn ranges(panel: &Panel) -> Option<((f64, f64), (f64, f64))> {
     }
     Some((pad(x, panel.x_scale, false), pad(y, panel.y_scale, true)))
 }
+
+/// The widest axis range drawn.
+const MAX_WIDTH: f64 = 1e307;
 
 fn pad((lo, hi): (f64, f64), scale: Scale, margin: bool) -> (f64, f64) {
     let share = if margin { 0.04 } else { 0.0 };

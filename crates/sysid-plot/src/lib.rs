@@ -39,7 +39,7 @@ mod draw;
 mod output;
 pub mod trajectories;
 
-pub use output::{PendingFile, PlotError, write_atomically};
+pub use output::{PendingFile, PlotError, is_replaceable, write_atomically};
 
 use std::path::{Path, PathBuf};
 

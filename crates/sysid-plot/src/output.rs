@@ -26,11 +26,35 @@ pub enum PlotError {
         /// The existing file.
         path: PathBuf,
     },
+    /// The target exists and is not a regular file (a directory, a device, a fifo, or
+    /// a symbolic link such as `/dev/stdout`): it is never replaced (the atomic rename
+    /// would put a regular file in its place).
+    #[error(
+        "{path}: not a regular file (a directory, device, fifo or symbolic link); give a file name"
+    )]
+    NotAFile {
+        /// The path.
+        path: PathBuf,
+    },
     /// A panel has no finite point to draw.
     #[error("panel {panel:?}: no finite point to draw")]
     NoData {
         /// The panel's title.
         panel: String,
+    },
+    /// A panel's values span more than an axis can show (beyond 1e307).
+    #[error(
+        "panel {panel:?}: the values of {axis} span {lo:e} to {hi:e} (with the margin), too wide to draw (at most 1e307)"
+    )]
+    TooWide {
+        /// The panel's title.
+        panel: String,
+        /// The axis label.
+        axis: String,
+        /// The lower end of the range.
+        lo: f64,
+        /// The upper end.
+        hi: f64,
     },
     /// The drawing library failed.
     #[error("{path}: drawing failed: {message}")]
@@ -111,6 +135,11 @@ impl PendingFile {
     /// Starts writing `target`. Without `overwrite` an existing `target` is refused
     /// now ([`PlotError::WouldOverwrite`]), and again, atomically, at the commit.
     pub fn create(target: &Path, overwrite: bool) -> Result<PendingFile, PlotError> {
+        if !is_replaceable(target) {
+            return Err(PlotError::NotAFile {
+                path: target.to_path_buf(),
+            });
+        }
         if !overwrite && target.exists() {
             return Err(PlotError::WouldOverwrite {
                 path: target.to_path_buf(),
@@ -172,6 +201,15 @@ impl Drop for PendingFile {
         if self.writer.take().is_some() {
             let _ = std::fs::remove_file(&self.temporary);
         }
+    }
+}
+
+/// Whether `target` may be replaced by a rename: it does not exist, or it is a regular
+/// file (not a symbolic link, whose rename would replace the link, not its file).
+pub fn is_replaceable(target: &Path) -> bool {
+    match std::fs::symlink_metadata(target) {
+        Ok(meta) => meta.file_type().is_file(),
+        Err(_) => true,
     }
 }
 

@@ -181,6 +181,7 @@ fn write_states(
 
 /// `sysid pf`.
 pub fn run_filter(a: &ParticleArgs) -> Result<(), CliError> {
+    crate::files::refuse_existing(a.out.as_deref(), a.force)?;
     match choose_model(a)? {
         ChosenModel::Nlbench(m) => filter_with(a, &m, 1, 0),
         ChosenModel::Linear(m) => {
@@ -198,6 +199,14 @@ fn filter_with<M: FilterModel + Sync>(
 ) -> Result<(), CliError> {
     let options = filter_options(a, false)?;
     let file = read_series(a, outputs, inputs)?;
+    // particles and their copy, weights, log-weights and ancestors; the filtered
+    // means of every step
+    let n = model.state_dim() as f64;
+    crate::resources::check_memory(
+        "--particles",
+        &format!("{} particles", a.particles),
+        8.0 * (a.particles as f64 * (2.0 * n + 4.0) + file.record.len() as f64 * n),
+    )?;
     let context = a.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
@@ -236,6 +245,7 @@ pub(crate) fn series_of<'a>(file: &'a DataFile, context: &str) -> Result<Series<
 
 /// `sysid psmooth`.
 pub fn run_smoother(a: &SmoothArgs) -> Result<(), CliError> {
+    crate::files::refuse_existing(a.common.out.as_deref(), a.common.force)?;
     match choose_model(&a.common)? {
         ChosenModel::Nlbench(m) => smooth_with(a, &m, 1, 0),
         ChosenModel::Linear(m) => {
@@ -255,6 +265,24 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     let path_count = paths_of(&a.method, a.paths, c.particles)?;
     let options = filter_options(c, true)?;
     let file = read_series(c, outputs, inputs)?;
+    // the filter's history (states, weights, ancestors at every step) and the paths
+    let (n, steps) = (model.state_dim() as f64, file.record.len() as f64);
+    let history = c.particles as f64 * steps * (n + 2.0);
+    let trajectories = path_count as f64 * steps * n;
+    let option = if trajectories > history {
+        "--paths"
+    } else {
+        "--particles"
+    };
+    crate::resources::check_memory(
+        option,
+        &format!(
+            "{} particles and {path_count} paths over {} steps",
+            c.particles,
+            file.record.len()
+        ),
+        8.0 * (history + trajectories),
+    )?;
     let context = c.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;

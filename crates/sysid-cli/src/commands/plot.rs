@@ -556,6 +556,17 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         };
         jobs.push((model_kind.name().into(), figure));
     }
+    // two inputs with one name (a/trace.csv, b/trace.csv) get distinct figures
+    let mut seen: Vec<String> = Vec::new();
+    for (stem, _) in &mut jobs {
+        let base = stem.clone();
+        let mut k = 1;
+        while seen.contains(stem) {
+            k += 1;
+            *stem = format!("{base}-{k}");
+        }
+        seen.push(stem.clone());
+    }
     let targets: Vec<PathBuf> = jobs
         .iter()
         .flat_map(|(stem, _)| ["svg", "png"].map(|ext| o.out_dir.join(format!("{stem}.{ext}"))))

@@ -210,6 +210,12 @@ fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
     if a.chains == 0 {
         return Err(bad("--chains", "must be at least 1"));
     }
+    // every chain keeps its draws (at least one parameter and the log-posterior)
+    crate::resources::check_memory(
+        "--iters",
+        &format!("{} chains x {} iterations", a.chains, a.iterations),
+        8.0 * 2.0 * a.chains as f64 * a.iterations as f64,
+    )?;
     let burn_in = a.burn_in.unwrap_or(a.iterations / 5);
     if burn_in >= a.iterations {
         return Err(bad(

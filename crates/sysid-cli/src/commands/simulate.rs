@@ -56,6 +56,11 @@ pub struct Options {
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    // every output checked before anything is written
+    crate::files::refuse_existing(
+        std::iter::once(o.out.as_path()).chain(o.model_out.as_deref()),
+        o.force,
+    )?;
     let Some(system_name) = o.system.as_deref() else {
         return super::simulate_model::run(o);
     };
@@ -73,6 +78,12 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             message: "must be at least 1".into(),
         });
     }
+    // the simulated record (at least a state, an input or output, and the noise)
+    crate::resources::check_memory(
+        "--steps",
+        &format!("{} steps", o.steps),
+        8.0 * 3.0 * o.steps as f64,
+    )?;
     if system_name == "nlbench" {
         return run_nlbench(o);
     }

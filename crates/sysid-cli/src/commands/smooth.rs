@@ -18,6 +18,7 @@ pub enum Pass {
 type MeanAndSd = (Vec<f64>, Vec<f64>);
 
 pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
+    crate::files::refuse_existing(std::iter::once(a.out.as_path()), a.force)?;
     let (model, file) = a.source.load()?;
     let mut warnings = Vec::new();
     let mut ws = KalmanWorkspace::new();

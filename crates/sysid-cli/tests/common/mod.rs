@@ -89,3 +89,13 @@ pub fn simulate(dir: &Path, system: &str, steps: usize, seed: u64) -> PathBuf {
     );
     data
 }
+
+/// The names of a directory's entries, sorted.
+pub fn entries(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}

@@ -10,8 +10,7 @@ mod common;
 mod api;
 mod awkward;
 
-use common::{s, scratch_dir, sysid};
-use std::path::Path;
+use common::{entries as names, s, scratch_dir, sysid};
 
 /// A scalar model (lgss) and a 2-output data file that the cases can point at.
 const MODEL: &str = r#"{"a": [[0.9]], "c": [[1.0]], "q": [[1.0]], "r": [[0.5]]}"#;
@@ -126,16 +125,6 @@ const CASES: &[Case] = &[
     case("missing required option", &[], &["loglik", "--model", "{dir}/m.json"], &["--data"]),
     case("Wiener fit on one output", &[("d.csv", DATA)], &["fit", "wiener", "--data", "{dir}/d.csv", "--out", "{dir}/out.json"], &["output"]),
 ];
-
-/// The case folder's file names, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut n: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    n.sort();
-    n
-}
 
 #[test]
 fn every_bad_input_gets_a_one_line_error_that_names_the_place() {

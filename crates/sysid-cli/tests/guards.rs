@@ -1,0 +1,270 @@
+//! The failing commands of the "no surprises" issue, through the binary: sizes beyond
+//! the machine's memory, a plot that looped forever, a thread count in the
+//! hundred-thousands, and outputs that clobbered each other, a device or a link.
+//! Each refusal exits 2 with one line on stderr and leaves no file behind.
+
+mod common;
+use common::{assert_ok, assert_one_line_error, entries, s, scratch_dir, simulate, sysid};
+
+#[test]
+fn sizes_beyond_the_machines_memory_are_refused_before_allocating() {
+    let dir = scratch_dir();
+    let nl = simulate(&dir, "nlbench", 100, 1);
+    let lg = simulate(&dir, "lgss", 100, 1);
+    let before = entries(&dir);
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &[
+                "pf",
+                "--system",
+                "nlbench",
+                "--data",
+                s(&nl),
+                "--particles",
+                "10000000000",
+            ],
+            "--particles",
+        ),
+        (
+            &[
+                "simulate",
+                "lgss",
+                "--steps",
+                "1000000000000",
+                "--out",
+                "s.csv",
+            ],
+            "--steps",
+        ),
+        (
+            &[
+                "psmooth",
+                "--system",
+                "nlbench",
+                "--data",
+                s(&nl),
+                "--paths",
+                "10000000000",
+                "--out",
+                "p.csv",
+            ],
+            "--paths",
+        ),
+        (
+            &[
+                "pmmh",
+                "--system",
+                "lgss",
+                "--data",
+                s(&lg),
+                "--iters",
+                "1000000000000",
+                "--out",
+                "c.csv",
+            ],
+            "--iters",
+        ),
+    ];
+    for (args, option) in cases {
+        let mut all: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+        // outputs in the scratch directory
+        for a in all.iter_mut() {
+            if a.ends_with(".csv") && !a.contains('/') {
+                *a = dir.join(a.as_str()).display().to_string();
+            }
+        }
+        let refs: Vec<&str> = all.iter().map(String::as_str).collect();
+        assert_one_line_error(&sysid(&refs), &[option, "of memory", "available"]);
+    }
+    assert_eq!(entries(&dir), before, "no file left behind");
+}
+
+#[test]
+fn a_plot_of_values_near_the_largest_float_is_refused_not_looped() {
+    let dir = scratch_dir();
+    let data = dir.join("big.csv");
+    std::fs::write(&data, "t,y1\n1,1.7e308\n2,0\n").unwrap();
+    let figures = dir.join("figs");
+    assert_one_line_error(
+        &sysid(&["plot", s(&data), "--out-dir", s(&figures)]),
+        &["y1", "too wide to draw"],
+    );
+    let left = if figures.exists() {
+        entries(&figures)
+    } else {
+        Vec::new()
+    };
+    assert!(left.is_empty(), "no figure left behind: {left:?}");
+}
+
+#[test]
+fn a_huge_thread_count_is_capped_with_a_note() {
+    let dir = scratch_dir();
+    let nl = simulate(&dir, "nlbench", 50, 1);
+    let out = sysid(&[
+        "--threads",
+        "100000",
+        "pf",
+        "--system",
+        "nlbench",
+        "--data",
+        s(&nl),
+        "--particles",
+        "200",
+    ]);
+    assert_ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--threads 100000 capped at"), "{err}");
+}
+
+#[test]
+fn outputs_never_clobber_each_other_a_device_or_a_link() {
+    let dir = scratch_dir();
+    let (data, model) = (dir.join("d.csv"), dir.join("m.json"));
+    assert_ok(&sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        "80",
+        "--out",
+        s(&data),
+        "--model-out",
+        s(&model),
+    ]));
+    let before = entries(&dir);
+    // one file for two outputs, with and without --force, spelled two ways
+    let same = dir.join("f.json");
+    let other_spelling = dir.join(".").join("f.json");
+    for force in [true, false] {
+        let mut args = vec![
+            "fit",
+            "lti",
+            "--data",
+            s(&data),
+            "--order",
+            "1",
+            "--out",
+            s(&same),
+            "--trace",
+            s(&other_spelling),
+        ];
+        if force {
+            args.push("--force");
+        }
+        assert_one_line_error(&sysid(&args), &["f.json", "two outputs"]);
+    }
+    let x = dir.join("x");
+    assert_one_line_error(
+        &sysid(&[
+            "simulate",
+            "lgss",
+            "--steps",
+            "10",
+            "--out",
+            s(&x),
+            "--model-out",
+            s(&x),
+            "--force",
+        ]),
+        &["two outputs"],
+    );
+    assert_eq!(entries(&dir), before, "no file left behind");
+    // an existing second output refuses the command before the first is written
+    let existing = dir.join("trace.csv");
+    std::fs::write(&existing, "keep").unwrap();
+    let new = dir.join("new.json");
+    assert_one_line_error(
+        &sysid(&[
+            "fit",
+            "lti",
+            "--data",
+            s(&data),
+            "--order",
+            "1",
+            "--out",
+            s(&new),
+            "--trace",
+            s(&existing),
+        ]),
+        &["trace.csv", "--force"],
+    );
+    assert!(!new.exists(), "half the outputs written");
+    assert_eq!(std::fs::read_to_string(&existing).unwrap(), "keep");
+    // a symbolic link (as /dev/stdout is) and a directory are never replaced
+    let target = dir.join("target.csv");
+    std::fs::write(&target, "kept").unwrap();
+    let link = dir.join("link.csv");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    for out in [&link, &dir] {
+        assert_one_line_error(
+            &sysid(&[
+                "smooth",
+                "--model",
+                s(&model),
+                "--data",
+                s(&data),
+                "--out",
+                s(out),
+                "--force",
+            ]),
+            &["not a regular file"],
+        );
+    }
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "kept");
+}
+
+#[test]
+fn two_inputs_with_one_name_get_two_figures() {
+    let dir = scratch_dir();
+    let data = simulate(&dir, "lgss", 80, 2);
+    let mut traces = Vec::new();
+    for sub in ["a", "b"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+        let trace = dir.join(sub).join("trace.csv");
+        assert_ok(&sysid(&[
+            "fit",
+            "lti",
+            "--data",
+            s(&data),
+            "--order",
+            "1",
+            "--max-iter",
+            if sub == "a" { "5" } else { "20" },
+            "--out",
+            s(&dir.join(sub).join("f.json")),
+            "--trace",
+            s(&trace),
+        ]));
+        traces.push(trace);
+    }
+    let figures = dir.join("figs");
+    assert_ok(&sysid(&[
+        "plot",
+        s(&traces[0]),
+        s(&traces[1]),
+        "--out-dir",
+        s(&figures),
+        "--force",
+    ]));
+    assert_eq!(
+        entries(&figures),
+        [
+            "trace-trace-2.png",
+            "trace-trace-2.svg",
+            "trace-trace.png",
+            "trace-trace.svg"
+        ]
+    );
+    let read = |name: &str| std::fs::read_to_string(figures.join(name)).unwrap();
+    assert_ne!(
+        read("trace-trace.svg"),
+        read("trace-trace-2.svg"),
+        "two different figures"
+    );
+}

@@ -8,11 +8,58 @@ use std::path::Path;
 use sysid::kalman::{LinearGaussianModel, Metadata, ModelSpec, Record};
 use sysid_plot::PendingFile;
 
+/// Where an output goes: a file written atomically, or standard output (`-`).
+pub enum Output {
+    /// A temporary file renamed into place by [`Output::commit`].
+    File(PendingFile),
+    /// Standard output, buffered.
+    Stdout(std::io::BufWriter<std::io::Stdout>),
+}
+
+impl Write for Output {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self {
+            Output::File(f) => f.write(buf),
+            Output::Stdout(w) => w.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Output::File(f) => f.flush(),
+            Output::Stdout(w) => w.flush(),
+        }
+    }
+}
+
+impl Output {
+    /// Moves the file into place, or flushes standard output.
+    pub fn commit(self) -> Result<(), CliError> {
+        match self {
+            Output::File(f) => Ok(f.commit()?),
+            Output::Stdout(mut w) => w.flush().map_err(|source| CliError::Io {
+                path: "-".into(),
+                source,
+            }),
+        }
+    }
+}
+
+/// Whether a path means standard output.
+pub fn is_stdout(path: &Path) -> bool {
+    path.as_os_str() == "-"
+}
+
 /// Starts writing `path` atomically (a temporary file renamed into place by
-/// [`PendingFile::commit`]; an error part-way leaves nothing behind); refuses to
-/// replace an existing file unless `force`.
-pub fn create_output(path: &Path, force: bool) -> Result<PendingFile, CliError> {
-    Ok(PendingFile::create(path, force)?)
+/// [`Output::commit`]; an error part-way leaves nothing behind); refuses to replace
+/// an existing file unless `force`. `-` is standard output: the command's summary then
+/// goes to stderr ([`crate::claim_stdout`]).
+pub fn create_output(path: &Path, force: bool) -> Result<Output, CliError> {
+    if is_stdout(path) {
+        crate::claim_stdout();
+        return Ok(Output::Stdout(std::io::BufWriter::new(std::io::stdout())));
+    }
+    Ok(Output::File(PendingFile::create(path, force)?))
 }
 
 /// Checks a command's outputs before any work: one file given for two outputs, an
@@ -33,6 +80,10 @@ pub fn refuse_existing<'a>(
         }
     }
     for path in paths {
+        if is_stdout(path) {
+            crate::claim_stdout();
+            continue;
+        }
         if !sysid_plot::is_replaceable(path) {
             return Err(CliError::Plot(sysid_plot::PlotError::NotAFile {
                 path: path.to_path_buf(),
@@ -67,7 +118,7 @@ pub fn write_output(path: &Path, force: bool, contents: &str) -> Result<(), CliE
             path: path.to_path_buf(),
             source,
         })?;
-    Ok(w.commit()?)
+    w.commit()
 }
 
 /// The error of a JSON file `path` (a `what` file) that does not parse: its line,

@@ -220,8 +220,21 @@ enum Command {
 
 /// Prints one line on stdout; a closed stdout (e.g. `| head -1`) ends the program
 /// quietly, as for any Unix filter, instead of panicking.
+/// Set when an output goes to standard output (`--out -`): the summary then goes to
+/// stderr, so that stdout carries the data alone.
+static STDOUT_CLAIMED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Marks standard output as taken by an output file (`-`).
+pub(crate) fn claim_stdout() {
+    STDOUT_CLAIMED.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
 pub(crate) fn say(line: &str) {
     use std::io::Write;
+    if STDOUT_CLAIMED.load(std::sync::atomic::Ordering::Relaxed) {
+        eprintln!("{line}");
+        return;
+    }
     let mut out = std::io::stdout().lock();
     if writeln!(out, "{line}").and_then(|_| out.flush()).is_err() {
         std::process::exit(0);

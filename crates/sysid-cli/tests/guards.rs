@@ -89,12 +89,15 @@ fn a_plot_of_values_near_the_largest_float_is_refused_not_looped() {
         &sysid(&["plot", s(&data), "--out-dir", s(&figures)]),
         &["y1", "too wide to draw"],
     );
-    let left = if figures.exists() {
-        entries(&figures)
-    } else {
-        Vec::new()
-    };
-    assert!(left.is_empty(), "no figure left behind: {left:?}");
+    assert!(!figures.exists(), "the folder the command made is gone");
+    // with a good file first, neither figure is left
+    let good = dir.join("good.csv");
+    std::fs::write(&good, "t,y1\n1,1\n2,0\n").unwrap();
+    assert_one_line_error(
+        &sysid(&["plot", s(&good), s(&data), "--out-dir", s(&figures)]),
+        &["too wide to draw"],
+    );
+    assert!(!figures.exists(), "all or nothing");
 }
 
 #[test]
@@ -266,5 +269,50 @@ fn two_inputs_with_one_name_get_two_figures() {
         read("trace-trace.svg"),
         read("trace-trace-2.svg"),
         "two different figures"
+    );
+}
+
+/// `-` is standard output: the data alone on stdout, the summary on stderr; `-` for
+/// two outputs is refused.
+#[test]
+fn a_dash_writes_standard_output() {
+    let dir = scratch_dir();
+    let out = sysid(&[
+        "simulate", "lgss", "--steps", "5", "--seed", "2", "--out", "-",
+    ]);
+    assert_ok(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 6, "header and 5 rows only: {stdout}");
+    assert_eq!(lines[0], "t,y1");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("wrote 5 steps"));
+    // the same rows as a file
+    let file = dir.join("s.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        "5",
+        "--seed",
+        "2",
+        "--out",
+        s(&file),
+    ]));
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), stdout);
+    assert!(!dir.join("-").exists());
+    assert_one_line_error(
+        &sysid(&[
+            "fit",
+            "lti",
+            "--data",
+            s(&file),
+            "--order",
+            "1",
+            "--out",
+            "-",
+            "--trace",
+            "-",
+        ]),
+        &["two outputs"],
     );
 }

@@ -176,7 +176,7 @@ fn write_states(
         }
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
-    Ok(w.commit()?)
+    w.commit()
 }
 
 /// `sysid pf`.

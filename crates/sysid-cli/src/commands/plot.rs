@@ -572,13 +572,26 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .flat_map(|(stem, _)| ["svg", "png"].map(|ext| o.out_dir.join(format!("{stem}.{ext}"))))
         .collect();
     crate::files::refuse_existing(targets.iter().map(PathBuf::as_path), o.force)?;
+    let created = !o.out_dir.exists();
     std::fs::create_dir_all(&o.out_dir).map_err(|source| CliError::Io {
         path: o.out_dir.clone(),
         source,
     })?;
     let mut written = Vec::new();
     for (stem, figure) in &jobs {
-        written.extend(figure.write(&o.out_dir, stem, o.force)?);
+        match figure.write(&o.out_dir, stem, o.force) {
+            Ok(paths) => written.extend(paths),
+            Err(e) => {
+                // all or nothing: the figures of this command and a folder it made go
+                for path in &written {
+                    let _ = std::fs::remove_file(path);
+                }
+                if created {
+                    let _ = std::fs::remove_dir(&o.out_dir);
+                }
+                return Err(e.into());
+            }
+        }
     }
     crate::report(
         o.json,

@@ -583,5 +583,5 @@ fn write_chains(path: &std::path::Path, force: bool, chains: &[Chain]) -> Result
             .map_err(io)?;
         }
     }
-    Ok(w.commit()?)
+    w.commit()
 }

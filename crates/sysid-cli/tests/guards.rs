@@ -316,3 +316,33 @@ fn a_dash_writes_standard_output() {
         &["two outputs"],
     );
 }
+
+/// A PMMH run too short to mix says so on stderr and in --json (R-hat, ESS).
+#[test]
+fn chains_that_have_not_mixed_are_flagged() {
+    let dir = scratch_dir();
+    let data = simulate(&dir, "lgss", 100, 3);
+    let out = sysid(&[
+        "pmmh",
+        "--system",
+        "lgss",
+        "--data",
+        s(&data),
+        "--iters",
+        "200",
+        "--chains",
+        "2",
+        "--json",
+    ]);
+    assert_ok(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("few effective draws"), "{stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let warnings = v["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("ESS below 400")),
+        "{v}"
+    );
+}

@@ -506,13 +506,17 @@ fn finish(
             min_update_rate = Some(min_update_rate.map_or(low, |m: f64| m.min(low)));
         }
     }
+    let warnings = mixing_warnings(&summary, chains.len(), &acceptance, min_update_rate);
+    for w in &warnings {
+        crate::warn(w);
+    }
     crate::report(
         a.json,
         serde_json::json!({
             "command": command, "system": a.system, "chains": chains.len(),
             "iterations": a.iterations, "burn_in": chains[0].burn_in, "particles": particles,
             "seed": a.seed, "acceptance": acceptance, "summary": summary,
-            "min_state_update_rate": min_update_rate,
+            "min_state_update_rate": min_update_rate, "warnings": warnings,
             "seconds": seconds, "ms_per_iteration": 1e3 * seconds * crate::threads().min(chains.len()) as f64 / iterations,
             "out": a.out,
         }),
@@ -584,4 +588,63 @@ fn write_chains(path: &std::path::Path, force: bool, chains: &[Chain]) -> Result
         }
     }
     w.commit()
+}
+
+/// R-hat above this says the chains have not mixed (Vehtari et al. 2021).
+const RHAT_LIMIT: f64 = 1.01;
+
+/// Fewer effective draws than this make the posterior summaries unreliable.
+const ESS_LIMIT: f64 = 400.0;
+
+/// PMMH acceptance below this: the chain barely moves.
+const ACCEPTANCE_LIMIT: f64 = 0.05;
+
+/// Warnings about chains whose summaries should not be trusted: draws that never
+/// changed, split R-hat above 1.01 (several chains), effective sample size below 400,
+/// PMMH acceptance below 0.05.
+fn mixing_warnings(
+    summary: &[sysid::pmcmc::ParameterSummary],
+    chains: usize,
+    acceptance: &[f64],
+    state_update_rate: Option<f64>,
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let list = |pick: &dyn Fn(&sysid::pmcmc::ParameterSummary) -> Option<String>| {
+        summary
+            .iter()
+            .filter_map(pick)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let high_rhat = list(&|s| (s.rhat > RHAT_LIMIT).then(|| format!("{} {:.3}", s.name, s.rhat)));
+    if chains >= 2 && !high_rhat.is_empty() {
+        warnings.push(format!(
+            "the chains have not mixed: R-hat above {RHAT_LIMIT} ({high_rhat}); run longer or \
+             tune the proposal before using the summaries"
+        ));
+    }
+    let stuck = list(&|s| (s.sd == 0.0).then(|| s.name.clone()));
+    if !stuck.is_empty() {
+        warnings.push(format!(
+            "the draws of {stuck} never changed: the sampler did not move them (a summary of \
+             one value)"
+        ));
+    }
+    let low_ess =
+        list(&|s| (s.sd > 0.0 && s.ess < ESS_LIMIT).then(|| format!("{} {:.0}", s.name, s.ess)));
+    if !low_ess.is_empty() {
+        warnings.push(format!(
+            "few effective draws: ESS below {ESS_LIMIT} ({low_ess}); the means and quantiles \
+             carry large Monte Carlo error"
+        ));
+    }
+    // PMMH only: particle Gibbs reports its state update rate instead
+    let lowest = acceptance.iter().copied().fold(f64::INFINITY, f64::min);
+    if state_update_rate.is_none() && lowest < ACCEPTANCE_LIMIT {
+        warnings.push(format!(
+            "acceptance {lowest:.3} below {ACCEPTANCE_LIMIT}: the chain barely moves (smaller \
+             proposal steps, or more particles for a less noisy likelihood estimate)"
+        ));
+    }
+    warnings
 }

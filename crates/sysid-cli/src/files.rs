@@ -519,8 +519,30 @@ pub fn parse_data(
     let time_col = header
         .iter()
         .position(|h| matches!(h.to_ascii_lowercase().as_str(), "t" | "time" | "date"));
-    let (mut u, mut y, mut labels) = (Vec::new(), Vec::new(), Vec::new());
+    // a column chosen twice, or as a signal and the time
+    let chosen: Vec<usize> = input_cols.iter().chain(&output_cols).copied().collect();
+    for (k, &c) in chosen.iter().enumerate() {
+        let problem = if chosen[..k].contains(&c) {
+            Some(if input_cols.contains(&c) && output_cols.contains(&c) {
+                "is chosen as both an input and an output"
+            } else {
+                "is chosen twice"
+            })
+        } else if Some(c) == time_col {
+            Some("is the time column, not a signal")
+        } else {
+            None
+        };
+        if let Some(problem) = problem {
+            return Err(CliError::Csv {
+                path: path.to_path_buf(),
+                message: format!("column {} {problem} (--inputs/--outputs)", header[c]),
+            });
+        }
+    }
+    let (mut u, mut y, mut labels, mut lines) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (line, row) in rows {
+        lines.push(line);
         let number =
             |col: usize, role: &'static str, allow_missing: bool| -> Result<f64, CliError> {
                 let field = &row[col];
@@ -572,6 +594,20 @@ pub fn parse_data(
         .collect();
     let (time, sample_time) = match numeric.filter(|v| !v.is_empty()) {
         Some(values) => {
+            // a numeric time that does not increase is a sorting or merging mistake
+            if let Some(k) = (1..values.len()).find(|&k| values[k] <= values[k - 1]) {
+                return Err(CliError::Csv {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "line {}, column {}: time {} does not increase (the row before has {}); \
+                         sort the rows",
+                        lines[k],
+                        header[time_col.unwrap_or(0)],
+                        labels[k],
+                        labels[k - 1]
+                    ),
+                });
+            }
             let dt = even_spacing(&values);
             (values, dt)
         }

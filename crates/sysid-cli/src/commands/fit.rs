@@ -411,6 +411,15 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         .iter()
         .map(|f| parse_fix(f))
         .collect::<Result<Vec<_>, _>>()?;
+    // a matrix fixed twice: the last would silently win
+    for (k, f) in fixes.iter().enumerate() {
+        if fixes[..k].iter().any(|g| g.name == f.name) {
+            return Err(CliError::BadOption {
+                option: "--fix",
+                message: format!("{} is fixed twice; give it once", f.name),
+            });
+        }
+    }
     let options = EmOptions {
         max_iterations: o.max_iter,
         tol: o.tol.unwrap_or(0.0),

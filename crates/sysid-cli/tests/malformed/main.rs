@@ -124,6 +124,11 @@ const CASES: &[Case] = &[
     case("unknown subcommand", &[], &["identify", "--data", "x.csv"], &["identify"]),
     case("missing required option", &[], &["loglik", "--model", "{dir}/m.json"], &["--data"]),
     case("Wiener fit on one output", &[("d.csv", DATA)], &["fit", "wiener", "--data", "{dir}/d.csv", "--out", "{dir}/out.json"], &["output"]),
+    case("one column as input and output", &[("d.csv", DATA_U), ("m.json", MODEL)], &["loglik", "--model", "{dir}/m.json", "--data", "{dir}/d.csv", "--inputs", "y1", "--outputs", "y1"], &["y1", "both an input and an output"]),
+    case("one output twice", &[("d.csv", DATA), ("m.json", MODEL)], &["loglik", "--model", "{dir}/m.json", "--data", "{dir}/d.csv", "--outputs", "y1,y1"], &["y1", "chosen twice"]),
+    case("the time column as an output", &[("d.csv", DATA), ("m.json", MODEL)], &["loglik", "--model", "{dir}/m.json", "--data", "{dir}/d.csv", "--outputs", "t"], &["time column"]),
+    case("time that does not increase", &[("d.csv", "t,y1\n1,0.5\n3,1\n2,0.1\n4,0\n"), ("m.json", MODEL)], LOGLIK, &["line 4", "does not increase"]),
+    case("a matrix fixed twice", &[("d.csv", DATA)], &["fit", "lti", "--data", "{dir}/d.csv", "--order", "1", "--fix", "A=0.5", "--fix", "A=0.9", "--out", "{dir}/out.json"], &["--fix", "A is fixed twice"]),
 ];
 
 #[test]

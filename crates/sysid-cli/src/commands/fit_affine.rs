@@ -24,7 +24,10 @@ use sysid::em::linear::Covariance;
 use sysid::em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
 use sysid::kalman::ModelSpec;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
-use sysid::smc::{FfbsiReject, Smoother, Tanizaki};
+use sysid::smc::{
+    AdditiveFunctional, FfbsiReject, History, Series, SmcError, Smoother, SmootherStats, Tanizaki,
+    Trajectories, TransitionBound,
+};
 
 /// The affine model chosen on the command line, with its starting parameters.
 enum Chosen {
@@ -213,20 +216,59 @@ where
             ));
         }
     }
+    let smoother = chosen_smoother(o)?;
+    fit_with_smoother(job, model, start, spec, row, smoother)
+}
+
+/// The E-step smoother `--smoother` names.
+#[derive(Debug, Clone, Copy)]
+enum ChosenSmoother {
+    Tanizaki(Tanizaki),
+    FfbsiReject(FfbsiReject),
+}
+
+/// `--smoother tanizaki|ffbsi-reject` (rejection FFBSi draws `--particles` paths).
+fn chosen_smoother(o: &Options) -> Result<ChosenSmoother, CliError> {
     match o.smoother.as_str() {
-        "tanizaki" => fit_with_smoother(job, model, start, spec, row, Tanizaki::default()),
-        "ffbsi-reject" => {
-            let smoother = FfbsiReject {
-                paths: job.o.particles,
-                max_trials: None,
-                parallel: false,
-            };
-            fit_with_smoother(job, model, start, spec, row, smoother)
-        }
+        "tanizaki" => Ok(ChosenSmoother::Tanizaki(Tanizaki::default())),
+        "ffbsi-reject" => Ok(ChosenSmoother::FfbsiReject(FfbsiReject {
+            paths: o.particles,
+            max_trials: None,
+            parallel: false,
+        })),
         other => Err(bad(
             "--smoother",
             format!("unknown smoother {other:?} (known: tanizaki, ffbsi-reject)"),
         )),
+    }
+}
+
+impl<M: TransitionBound + Sync> Smoother<M> for ChosenSmoother {
+    fn trajectories(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+    ) -> Result<(Trajectories, SmootherStats), SmcError> {
+        match self {
+            ChosenSmoother::Tanizaki(s) => s.trajectories(model, history, data, seed),
+            ChosenSmoother::FfbsiReject(s) => s.trajectories(model, history, data, seed),
+        }
+    }
+
+    fn additive<F: AdditiveFunctional + ?Sized>(
+        &self,
+        model: &M,
+        history: &History,
+        data: &Series,
+        seed: u64,
+        functional: &mut F,
+    ) -> Result<SmootherStats, SmcError> {
+        match self {
+            ChosenSmoother::Tanizaki(s) => s.additive(model, history, data, seed, functional),
+            ChosenSmoother::FfbsiReject(s) => s.additive(model, history, data, seed, functional),
+        }
     }
 }
 
@@ -401,33 +443,10 @@ where
         explore_particles: (o.particles / 2).max(2),
         ..RobustOptions::default()
     };
+    let smoother = chosen_smoother(o)?;
     let began = std::time::Instant::now();
-    let fit = match o.smoother.as_str() {
-        "tanizaki" => fit_robust(
-            model,
-            *series,
-            &start,
-            &spec,
-            &Tanizaki::default(),
-            &options,
-            o.seed,
-        ),
-        "ffbsi-reject" => {
-            let smoother = FfbsiReject {
-                paths: o.particles,
-                max_trials: None,
-                parallel: false,
-            };
-            fit_robust(model, *series, &start, &spec, &smoother, &options, o.seed)
-        }
-        other => {
-            return Err(bad(
-                "--smoother",
-                format!("unknown smoother {other:?} (known: tanizaki, ffbsi-reject)"),
-            ));
-        }
-    }
-    .map_err(affine_error(&context))?;
+    let fit = fit_robust(model, *series, &start, &spec, &smoother, &options, o.seed)
+        .map_err(affine_error(&context))?;
     let seconds = began.elapsed().as_secs_f64();
     let names = model.names(&start);
     let named = |p: &AffineParams| -> serde_json::Value {

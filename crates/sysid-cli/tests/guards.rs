@@ -346,3 +346,36 @@ fn chains_that_have_not_mixed_are_flagged() {
         "{v}"
     );
 }
+
+/// A model file with a diffuse initial state is refused by the particle commands (a
+/// flat prior cannot be sampled; fit affine used to start from x_0 = 0 exactly).
+#[test]
+fn particle_methods_refuse_a_diffuse_initial_state() {
+    let dir = scratch_dir();
+    let data = simulate(&dir, "lgss", 50, 1);
+    let model = dir.join("diffuse.json");
+    std::fs::write(
+        &model,
+        r#"{"a": [[1.0]], "c": [[1.0]], "q": [[1.0]], "r": [[1.0]], "initial": "diffuse"}"#,
+    )
+    .unwrap();
+    let out = dir.join("out.json");
+    assert_one_line_error(
+        &sysid(&["pf", "--model", s(&model), "--data", s(&data)]),
+        &["diffuse", "proper initial law"],
+    );
+    assert_one_line_error(
+        &sysid(&[
+            "fit",
+            "affine",
+            "--init",
+            s(&model),
+            "--data",
+            s(&data),
+            "--out",
+            s(&out),
+        ]),
+        &["diffuse", "mu and P1"],
+    );
+    assert!(!out.exists());
+}

@@ -130,6 +130,15 @@ impl LinearAffine {
                 "the linear affine form has no inputs, offset or cross-covariance".into(),
             ));
         }
+        if model.is_diffuse() {
+            // particle EM samples x_0: a flat prior has no draws (it used to become
+            // x_0 = 0 exactly)
+            return Err(AffineEmError::Unsupported(
+                "the model's initial state is diffuse; particle EM needs a proper initial \
+                 law: give its mu and P1 (\"initial\": \"given\")"
+                    .into(),
+            ));
+        }
         let params = AffineParams {
             beta_x: model.a().clone(),
             beta_y: model.c().clone(),

@@ -27,6 +27,12 @@ pub enum AdapterError {
     /// Q or R is singular, so the transition or observation density does not exist.
     #[error("the SMC adapter needs a positive definite covariance: {0}")]
     Singular(#[from] LinalgError),
+    /// A diffuse initial state (a flat prior) cannot be sampled.
+    #[error(
+        "particle methods need a proper initial law, and the model's initial state is diffuse: \
+         give its mu and P1 (\"initial\": \"given\"), or use the exact diffuse Kalman commands"
+    )]
+    Diffuse,
     /// A dimension above [`MAX_DIM`].
     #[error("the SMC adapter takes at most {MAX_DIM} states and outputs, got n = {n}, p = {p}")]
     TooLarge {
@@ -137,8 +143,8 @@ pub struct LinearGaussianSmc {
 }
 
 impl LinearGaussianSmc {
-    /// Wraps a model. Errors when `S != 0`, when `Q` or `R` is not positive definite,
-    /// or when a dimension exceeds [`MAX_DIM`].
+    /// Wraps a model. Errors when `S != 0`, when the initial state is diffuse, when `Q`
+    /// or `R` is not positive definite, or when a dimension exceeds [`MAX_DIM`].
     pub fn new(model: &LinearGaussianModel) -> Result<Self, AdapterError> {
         let (n, m, p) = (model.n(), model.m(), model.p());
         if n > MAX_DIM || p > MAX_DIM {
@@ -146,6 +152,9 @@ impl LinearGaussianSmc {
         }
         if model.has_cross_covariance() {
             return Err(AdapterError::CrossCovariance);
+        }
+        if model.is_diffuse() {
+            return Err(AdapterError::Diffuse);
         }
         let q_upper = cholesky_upper("Q", model.q())?;
         let r_upper = cholesky_upper("R", model.r())?;

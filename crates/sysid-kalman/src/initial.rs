@@ -14,9 +14,10 @@ pub enum InitialState {
     #[default]
     Given,
     /// `P1` the stationary covariance `P = A P A' + Q` of the state noise (needs a
-    /// stable `A`) and `mu` the steady state of the record's first input,
-    /// `(I - A)^{-1} B u_1` (0 without inputs, or through [`InitialState::apply`]): a
-    /// record that starts in steady state.
+    /// stable `A`) and `mu` the steady state of the record's early inputs,
+    /// `(I - A)^{-1} B u_bar` with `u_bar` the mean input over the system's memory at
+    /// the start of the record (0 without inputs, or through
+    /// [`InitialState::apply`]): a record that starts in steady state.
     Stationary,
     /// Every direction of `x_1` diffuse (`A_d = I`, `P1 = 0`): nothing is assumed of
     /// the initial state; the data determine it (exact diffuse initialisation).
@@ -45,7 +46,15 @@ impl InitialState {
     }
 
     /// [`apply`](Self::apply) for a given record: a stationary initial state starts at
-    /// the steady state of the record's first input, `mu = (I - A)^{-1} B u_1`.
+    /// the steady state of the record's early inputs, `mu = (I - A)^{-1} B u_bar`,
+    /// where `u_bar` is the mean input over the first `H` samples and `H` the system's
+    /// memory, the steps in which `rho^H` falls to 1 % (`rho` the spectral radius of
+    /// `A`; at least 1, at most the record). The inputs before the record are unknown;
+    /// assuming they resembled its first `H` is right both for a record that starts in
+    /// a steady state (a constant input: the first input's steady state) and for one
+    /// driven by noise (its mean: the first input alone would put the state far from
+    /// where a noise-driven system sits, and the first predictions would be off by
+    /// many standard deviations).
     ///
     /// # Errors
     /// As [`apply`](Self::apply).
@@ -59,7 +68,15 @@ impl InitialState {
             return Ok(applied);
         }
         let n = model.n();
-        let forced = model.b() * record.u.column(0);
+        let radius = spectral_radius(model.a());
+        let memory = if radius > 0.0 {
+            (0.01_f64.ln() / radius.ln()).ceil().max(1.0) as usize
+        } else {
+            1
+        };
+        let early = memory.min(record.len());
+        let mean_input = record.u.columns(0, early).column_mean();
+        let forced = model.b() * mean_input;
         let mu = (DMatrix::identity(n, n) - model.a())
             .lu()
             .solve(&forced)

@@ -42,6 +42,11 @@ struct Cli {
     /// No progress bars or notes on stderr (results still go to stdout).
     #[arg(long, global = true)]
     quiet: bool,
+    /// Exit with code 1 when the command printed a warning (a result that should not
+    /// be trusted as it is: unconverged EM, a chain that has not mixed, a filter that
+    /// lost the state...). The outputs are written as without it.
+    #[arg(long, global = true)]
+    strict: bool,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -244,8 +249,12 @@ pub(crate) fn say(line: &str) {
 /// Prints a warning about a result that should not be trusted as it is (stderr, so
 /// that `--json` output stays one object; the same text goes in its `warnings`).
 pub(crate) fn warn(line: &str) {
+    WARNINGS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     eprintln!("sysid: warning: {line}");
 }
+
+/// Warnings printed by the current command (for `--strict`).
+static WARNINGS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Prints a command's summary: `value` as one JSON line under `--json`, else `text`.
 pub(crate) fn report(json: bool, value: serde_json::Value, text: impl FnOnce() -> String) {
@@ -349,8 +358,18 @@ pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode
         Ok(cli) => cli,
         Err(e) => return command_line_error(&e),
     };
+    let strict = cli.strict;
+    WARNINGS.store(0, std::sync::atomic::Ordering::Relaxed);
     let result = run(cli);
+    let warnings = WARNINGS.load(std::sync::atomic::Ordering::Relaxed);
     match result {
+        Ok(()) if strict && warnings > 0 => {
+            eprintln!(
+                "sysid: error: --strict: {warnings} warning{} above",
+                if warnings == 1 { "" } else { "s" }
+            );
+            ExitCode::from(error::EXIT_FAILURE)
+        }
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("sysid: error: {e}");

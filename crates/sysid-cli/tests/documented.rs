@@ -38,6 +38,12 @@ fn commands(file: &str, marker: &str) -> Vec<String> {
 
 /// Runs each command in a fresh folder, as `sysid` from the repository's root.
 fn run_all(lines: &[String]) -> PathBuf {
+    run_checked(lines, false)
+}
+
+/// [`run_all`], and with `no_warnings` every command must also print no warning (the
+/// README's examples use settings whose results can be trusted).
+fn run_checked(lines: &[String], no_warnings: bool) -> PathBuf {
     let dir = scratch_dir();
     let data = root().join("crates/sysid-cli/tests/data/");
     for line in lines {
@@ -56,13 +62,18 @@ fn run_all(lines: &[String]) -> PathBuf {
             "`{line}` failed: {}",
             String::from_utf8_lossy(&out.stderr)
         );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !no_warnings || !stderr.contains("warning"),
+            "`{line}` warned: {stderr}"
+        );
     }
     dir
 }
 
 #[test]
 fn the_readme_tour_runs() {
-    let dir = run_all(&commands("README.md", "## A 30-second tour"));
+    let dir = run_checked(&commands("README.md", "## A 30-second tour"), true);
     for file in ["fit.json", "smoothed.csv", "nl.json", "chains.csv"] {
         assert!(dir.join(file).exists(), "{file}");
     }

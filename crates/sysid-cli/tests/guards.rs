@@ -12,6 +12,19 @@ fn sizes_beyond_the_machines_memory_are_refused_before_allocating() {
     let nl = simulate(&dir, "nlbench", 100, 1);
     let lg = simulate(&dir, "lgss", 100, 1);
     let before = entries(&dir);
+    // a repeat count that would run for days is refused by name
+    assert_one_line_error(
+        &sysid(&[
+            "pf",
+            "--system",
+            "nlbench",
+            "--data",
+            s(&nl),
+            "--repeats",
+            "1000000000",
+        ]),
+        &["--repeats", "at most 1000"],
+    );
     let cases: [(&[&str], &str); 4] = [
         (
             &[

@@ -200,3 +200,104 @@ fn particle_commands_give_one_line_errors() {
     );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "keep");
 }
+
+/// The log-likelihood sd that `pf` reports (from its repeats) agrees with the sd of
+/// 200 independent runs within 15 %: pooled over 20 invocations (10 runs each) against
+/// 200 single runs on other seeds; lgss at T = 300, M = 200.
+#[test]
+fn pf_loglik_sd_agrees_with_the_sd_of_independent_runs() {
+    let dir = scratch_dir();
+    let data = common::simulate(&dir, "lgss", 300, 4);
+    let pf = |seed: u64, repeats: &str| {
+        json_of(&sysid(&[
+            "pf",
+            "--system",
+            "lgss",
+            "--data",
+            s(&data),
+            "--particles",
+            "200",
+            "--seed",
+            &seed.to_string(),
+            "--repeats",
+            repeats,
+            "--json",
+        ]))
+    };
+    let singles: Vec<f64> = (1000..1200)
+        .map(|seed| pf(seed, "0")["loglik"].as_f64().unwrap())
+        .collect();
+    let mean = singles.iter().sum::<f64>() / 200.0;
+    let empirical = (singles.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 199.0).sqrt();
+    let reported: Vec<f64> = (1..=20)
+        .map(|seed| pf(seed, "9")["diagnostics"]["loglik_sd"].as_f64().unwrap())
+        .collect();
+    let pooled = (reported.iter().map(|sd| sd * sd).sum::<f64>() / 20.0).sqrt();
+    eprintln!("pooled reported sd {pooled}, empirical sd {empirical}");
+    assert!(
+        (pooled / empirical - 1.0).abs() < 0.15,
+        "reported {pooled} vs empirical {empirical}"
+    );
+    // at this size the sd is above 1.5 (about 3): a warning, with the particles that
+    // would bring it to 1; the filter is not lost (one outlying step is not a loss)
+    let one = pf(1, "9");
+    let warnings = one["warnings"].as_array().unwrap();
+    assert_eq!(warnings.len(), 1, "{one}");
+    assert!(
+        warnings[0]
+            .as_str()
+            .unwrap()
+            .contains("particles would bring it to 1")
+    );
+}
+
+/// On nlbench, 100 particles lose the state (the filter follows the wrong branch of
+/// y = d x^2): pf says so on stderr and in --json, and --strict makes it exit 1 with
+/// the estimates still written.
+#[test]
+fn pf_warns_when_the_filter_loses_the_state_and_strict_fails() {
+    let dir = scratch_dir();
+    let data = common::simulate(&dir, "nlbench", 1000, 1);
+    let out = dir.join("f.csv");
+    let args = |strict: bool| {
+        let mut v = vec![
+            "pf",
+            "--system",
+            "nlbench",
+            "--data",
+            s(&data),
+            "--particles",
+            "100",
+            "--out",
+            s(&out),
+            "--force",
+            "--json",
+        ];
+        if strict {
+            v.push("--strict");
+        }
+        sysid(&v)
+    };
+    let run = args(false);
+    assert!(run.status.success());
+    let summary = json_of(&run);
+    let warnings = summary["warnings"].as_array().unwrap();
+    let text = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("lost the state")),
+        "{summary}"
+    );
+    assert!(summary["diagnostics"]["loglik_sd"].as_f64().unwrap() > 1.5);
+    assert!(
+        text.contains("sysid: warning: the filter lost the state"),
+        "{text}"
+    );
+    std::fs::remove_file(&out).unwrap();
+    let strict = args(true);
+    assert_eq!(strict.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&strict.stderr);
+    assert!(text.lines().last().unwrap().contains("--strict"), "{text}");
+    assert!(out.exists(), "--strict keeps the outputs");
+}

@@ -3,6 +3,7 @@
 pub mod compare;
 pub mod demo;
 pub mod detrend;
+mod filter_trust;
 pub mod fit;
 pub mod fit_affine;
 pub mod fit_wiener;

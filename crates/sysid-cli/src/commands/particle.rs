@@ -36,6 +36,10 @@ pub struct ParticleArgs {
     /// Seed of the random streams.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Independent repeats of the filter that give the Monte Carlo sd of the
+    /// log-likelihood estimate (a warning above 1.5 nats); 0 skips them.
+    #[arg(long, default_value_t = 9)]
+    pub repeats: usize,
     /// Output CSV file.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -84,7 +88,20 @@ fn smc_error(context: &str) -> impl Fn(SmcError) -> CliError + '_ {
     }
 }
 
+/// The most repeats `--repeats` takes: the sd of 1001 runs is known to 2 %.
+const MAX_REPEATS: usize = 1000;
+
 fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions, CliError> {
+    if a.repeats > MAX_REPEATS {
+        return Err(CliError::BadOption {
+            option: "--repeats",
+            message: format!(
+                "{} repeats asked; at most {MAX_REPEATS} (the sd of {} runs is known to 2 %)",
+                a.repeats,
+                MAX_REPEATS + 1
+            ),
+        });
+    }
     let resampling = Resampling::from_name(&a.resample).ok_or_else(|| CliError::BadOption {
         option: "--resample",
         message: format!(
@@ -214,23 +231,48 @@ fn filter_with<M: FilterModel + Sync>(
     let run = pf
         .run(model, &series, a.seed)
         .map_err(smc_error(&context))?;
+    let trust = super::filter_trust::diagnose(
+        model,
+        &series,
+        pf.options(),
+        a.seed,
+        (run.loglik, pf.ess()),
+        a.repeats,
+        |t| {
+            file.time
+                .get(t)
+                .map_or_else(|| (t + 1).to_string(), |v| fmt(*v))
+        },
+    );
     let seconds = start.elapsed().as_secs_f64();
     write_states(a, &file.time, model.state_dim(), pf.means(), None)?;
     if a.json {
         let s = serde_json::json!({
             "command": "pf", "loglik": run.loglik, "resampled_steps": run.resampled_steps,
             "steps": series.steps(), "particles": a.particles, "seed": a.seed,
-            "seconds": seconds, "out": a.out,
+            "seconds": seconds, "out": a.out, "diagnostics": trust.json(),
+            "warnings": trust.warnings,
         });
         crate::say(&s.to_string());
     } else {
+        let sd = trust
+            .loglik_sd
+            .map(|sd| format!(", sd {} over {} runs", fmt(sd), a.repeats + 1))
+            .unwrap_or_default();
+        let ess = trust
+            .min_ess
+            .map(|(e, t)| format!("; smallest ESS {e:.1} at step {}", t + 1))
+            .unwrap_or_default();
         crate::say(&format!(
-            "loglik estimate {} ({} particles, resampled at {} of {} steps)",
+            "loglik estimate {}{sd} ({} particles, resampled at {} of {} steps{ess})",
             run.loglik,
             a.particles,
             run.resampled_steps,
             series.steps()
         ));
+    }
+    for w in &trust.warnings {
+        crate::warn(w);
     }
     Ok(())
 }
@@ -320,6 +362,21 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         .map_err(smc_error(&context))?;
         Ok((run, smoothed))
     })()?;
+    // the smoothed paths are drawn from the filter's particles: a filter that lost the
+    // state smooths the wrong trajectory there
+    let trust = super::filter_trust::diagnose(
+        model,
+        &series,
+        pf.options(),
+        c.seed,
+        (run.loglik, pf.ess()),
+        c.repeats,
+        |t| {
+            file.time
+                .get(t)
+                .map_or_else(|| (t + 1).to_string(), |v| fmt(*v))
+        },
+    );
     let seconds = start.elapsed().as_secs_f64();
     let (means, sds) = (paths.means(), paths.std_devs());
     write_states(c, &file.time, model.state_dim(), &means, Some(&sds))?;
@@ -329,16 +386,24 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
             "paths": paths.paths(), "particles": c.particles, "steps": series.steps(),
             "density_evaluations": stats.density_evaluations, "trials": stats.trials,
             "fallbacks": stats.fallbacks, "seed": c.seed, "seconds": seconds, "out": c.out,
+            "diagnostics": trust.json(), "warnings": trust.warnings,
         });
         crate::say(&s.to_string());
     } else {
+        let sd = trust
+            .loglik_sd
+            .map(|sd| format!(" (sd {} over {} runs)", fmt(sd), c.repeats + 1))
+            .unwrap_or_default();
         crate::say(&format!(
-            "{}: {} paths from {} particles; filter loglik estimate {}",
+            "{}: {} paths from {} particles; filter loglik estimate {}{sd}",
             a.method,
             paths.paths(),
             c.particles,
             run.loglik
         ));
+    }
+    for w in &trust.warnings {
+        crate::warn(w);
     }
     Ok(())
 }

@@ -10,6 +10,12 @@ pub enum CliError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// An input file (data, model, prior) that could not be opened or read.
+    #[error("{path}: {source}")]
+    Input {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: refusing to overwrite an existing file (use --force)")]
     WouldOverwrite { path: PathBuf },
     #[error("{path}: given for two outputs of this command; choose a file for each")]
@@ -165,6 +171,9 @@ impl CliError {
             )
         };
         let bad_input = match self {
+            // an input file that cannot be read is the user's input; an output that
+            // cannot be written (a full disk, a missing folder) is a failure
+            CliError::Input { .. } => true,
             CliError::Io { .. } | CliError::LikelihoodDecreased(_) => false,
             CliError::FitFailedMidRun { input, .. } => *input,
             CliError::FitFailedAtStart { .. } => true,

@@ -156,7 +156,7 @@ pub struct ModelFile {
 
 /// Reads and validates a model file, with its metadata if it has any.
 pub fn read_model_file(path: &Path) -> Result<ModelFile, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+    let text = std::fs::read_to_string(path).map_err(|source| CliError::Input {
         path: path.to_path_buf(),
         source,
     })?;
@@ -376,7 +376,7 @@ pub type NumberedRow = (u64, csv::StringRecord);
 /// header is line 1); refuses an empty file and rows whose length differs from the
 /// header's.
 pub fn read_rows(path: &Path) -> Result<(Vec<String>, Vec<NumberedRow>), CliError> {
-    let file = File::open(path).map_err(|source| CliError::Io {
+    let file = File::open(path).map_err(|source| CliError::Input {
         path: path.to_path_buf(),
         source,
     })?;
@@ -391,7 +391,7 @@ pub fn parse_rows(
     let mut bytes = Vec::new();
     let mut file = file;
     file.read_to_end(&mut bytes)
-        .map_err(|source| CliError::Io {
+        .map_err(|source| CliError::Input {
             path: path.to_path_buf(),
             source,
         })?;
@@ -489,7 +489,7 @@ pub fn read_columns(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>), CliErro
 /// missing; input cells must be finite numbers. Errors name the file, the line
 /// (1-based, the header is line 1) and the column.
 pub fn read_data(path: &Path, choice: &ColumnChoice) -> Result<DataFile, CliError> {
-    let file = File::open(path).map_err(|source| CliError::Io {
+    let file = File::open(path).map_err(|source| CliError::Input {
         path: path.to_path_buf(),
         source,
     })?;

@@ -392,3 +392,40 @@ fn particle_methods_refuse_a_diffuse_initial_state() {
     );
     assert!(!out.exists());
 }
+
+/// Input the user named but that is not there, or a filter option out of range, is bad
+/// input (exit 2) and the message names the file or the flag: a missing `--init` file
+/// used to exit 1, and `--particles 0` was blamed on "options: invalid option
+/// `particles`".
+#[test]
+fn missing_inputs_and_bad_filter_flags_are_bad_input_named_as_typed() {
+    let dir = scratch_dir();
+    let data = simulate(&dir, "lgss", 50, 1);
+    let missing = dir.join("nonexistent.json");
+    assert_one_line_error(
+        &sysid(&[
+            "fit",
+            "lti",
+            "--data",
+            s(&data),
+            "--order",
+            "1",
+            "--init",
+            s(&missing),
+            "--out",
+            s(&dir.join("f.json")),
+        ]),
+        &["nonexistent.json", "No such file"],
+    );
+    assert_one_line_error(
+        &sysid(&["loglik", "--model", s(&dir), "--data", s(&data)]),
+        &["Is a directory"],
+    );
+    for (flag, value) in [("--particles", "0"), ("--ess", "2")] {
+        assert_one_line_error(
+            &sysid(&["pf", "--system", "lgss", "--data", s(&data), flag, value]),
+            &[&format!("error: {flag}:")],
+        );
+    }
+    assert!(!dir.join("f.json").exists());
+}

@@ -145,7 +145,7 @@ fn particle_commands_give_one_line_errors() {
     );
     assert_one_line_error(
         &sysid(&["pf", "--system", "nlbench", "--data", d, "--ess", "2"]),
-        &["ess_threshold"],
+        &["--ess"],
     );
     assert_one_line_error(
         &sysid(&["pf", "--system", "foo", "--data", d]),

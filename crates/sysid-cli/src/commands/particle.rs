@@ -81,6 +81,25 @@ fn paths_of(method: &str, paths: Option<usize>, particles: usize) -> Result<usiz
     }
 }
 
+/// An invalid filter option, blamed on the command-line flag that set it.
+fn option_error(source: SmcError) -> CliError {
+    if let SmcError::InvalidOption { name, reason } = &source {
+        let flag = match *name {
+            "particles" => Some("--particles"),
+            "ess_threshold" => Some("--ess"),
+            "resampling" => Some("--resample"),
+            _ => None,
+        };
+        if let Some(option) = flag {
+            return CliError::BadOption {
+                option,
+                message: reason.clone(),
+            };
+        }
+    }
+    smc_error("options")(source)
+}
+
 fn smc_error(context: &str) -> impl Fn(SmcError) -> CliError + '_ {
     move |source| CliError::Smc {
         context: context.to_string(),
@@ -118,7 +137,7 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
         parallel: crate::threads() > 1,
         record_summaries: true,
     };
-    options.check().map_err(smc_error("options"))?;
+    options.check().map_err(option_error)?;
     Ok(options)
 }
 
@@ -226,7 +245,7 @@ fn filter_with<M: FilterModel + Sync>(
     )?;
     let context = a.data.data.display().to_string();
     let series = series_of(&file, &context)?;
-    let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
+    let mut pf = ParticleFilter::new(options).map_err(option_error)?;
     let start = std::time::Instant::now();
     let run = pf
         .run(model, &series, a.seed)
@@ -327,7 +346,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     )?;
     let context = c.data.data.display().to_string();
     let series = series_of(&file, &context)?;
-    let mut pf = ParticleFilter::new(options).map_err(smc_error("options"))?;
+    let mut pf = ParticleFilter::new(options).map_err(option_error)?;
     let parallel = crate::threads() > 1;
     let start = std::time::Instant::now();
     let (run, (paths, stats)) = (|| {

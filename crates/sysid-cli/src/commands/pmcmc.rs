@@ -176,7 +176,7 @@ fn priors(a: &ChainArgs, names: &[String]) -> Result<IndependentPrior, CliError>
         })
         .collect();
     if let Some(path) = &a.prior {
-        let text = std::fs::read_to_string(path).map_err(|source| CliError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| CliError::Input {
             path: path.clone(),
             source,
         })?;

@@ -148,7 +148,8 @@ fn robust_json(fit: &RobustFit) -> serde_json::Value {
     };
     json!({
         "starts": fit.starts.iter().map(|o| json!({
-            "status": describe(&o.status), "loglik": o.loglik, "estimate": params(&o.estimate),
+            "status": describe(&o.status), "loglik": o.loglik,
+            "noise_escalations": o.noise_escalations, "estimate": params(&o.estimate),
         })).collect::<Vec<_>>(),
         "maxima": fit.maxima.iter().map(|m| json!({
             "loglik": m.loglik, "starts": m.starts, "estimate": params(&m.estimate),

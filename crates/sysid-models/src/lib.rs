@@ -7,16 +7,20 @@
 //! | [`lti2x2`] | 2-input 2-output system of McMillan degree 8 | Gibson and Ninness (2005), ALGORITHMS.md 1.5 |
 //! | [`BlindWiener`] | 2-state linear part, saturation and dead zone, unobserved input | seed 001, ALGORITHMS.md 4 |
 //! | [`Nlbench`] | `x' = a x + b x/(1+x^2) + c cos(1.2 t) + w`, `y = d x^2 + e` | Schön, Wills and Ninness (2006), ALGORITHMS.md 3 |
+//! | [`Pendulum`] | damped pendulum driven by a torque, angle measured: two states, affine in five coefficients | Särkkä (2013), Euler-discretised; sysid's settings |
 //!
 //! [`LinearGaussianSmc`] lets any linear Gaussian model run through the particle
-//! methods of `sysid-smc`, which is how they are checked against the Kalman answer.
+//! methods of `sysid-smc`, which is how they are checked against the Kalman answer;
+//! [`GaussianAffineSmc`] does the same for any affine model from its regressors.
 
 mod affine;
 mod families;
+mod gaussian_affine;
 mod gradient_lgss;
 mod linear_smc;
 mod nlbench;
 pub mod nlbench_study;
+mod pendulum;
 mod truncated_normal;
 mod wiener;
 mod wiener_guided;
@@ -25,9 +29,11 @@ mod wiener_start;
 
 pub use affine::{LinearAffine, NlbenchAffine};
 pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};
+pub use gaussian_affine::{GaussianAffineSmc, MAX_REGRESSORS};
 pub use gradient_lgss::LgssGradient;
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};
 pub use nlbench::{Nlbench, NlbenchParams, NlbenchSimulation};
+pub use pendulum::{PENDULUM_COEFFICIENTS, Pendulum, PendulumSimulation};
 pub use wiener::{
     BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone,
     normalised_magnitude_error, saturation, spectral_magnitude, wiener_frequency_grid,

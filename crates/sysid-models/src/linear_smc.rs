@@ -43,8 +43,22 @@ pub enum AdapterError {
     },
 }
 
+/// `|L^{-1} r|^2` for a lower-triangular row-major `k x k` factor `L` (forward
+/// substitution); `r` is overwritten by `L^{-1} r`.
+#[inline]
+pub(crate) fn whitened_norm2(lower: &[f64], k: usize, r: &mut [f64]) -> f64 {
+    let mut norm2 = 0.0;
+    for i in 0..k {
+        let row = &lower[i * k..i * k + i];
+        let s = r[i] - row.iter().zip(&r[..i]).map(|(l, v)| l * v).sum::<f64>();
+        r[i] = s / lower[i * k + i];
+        norm2 += r[i] * r[i];
+    }
+    norm2
+}
+
 /// Row-major copy of a matrix.
-fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+pub(crate) fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
     m.transpose().as_slice().to_vec()
 }
 
@@ -213,19 +227,6 @@ impl LinearGaussianSmc {
         Self::add_product(&self.b, self.m, u, out);
     }
 
-    /// `|L^{-1} r|^2` for a lower-triangular row-major `L` (forward substitution).
-    #[inline]
-    fn whitened_norm2(lower: &[f64], k: usize, r: &mut [f64]) -> f64 {
-        let mut norm2 = 0.0;
-        for i in 0..k {
-            let row = &lower[i * k..i * k + i];
-            let s = r[i] - row.iter().zip(&r[..i]).map(|(l, v)| l * v).sum::<f64>();
-            r[i] = s / lower[i * k + i];
-            norm2 += r[i] * r[i];
-        }
-        norm2
-    }
-
     /// The Gaussian log-density of the observed entries of `residual` under the
     /// corresponding block of R (computed on the fly; used only for partly missing y).
     fn partial_log_density(&self, residual: &[f64], y: &[f64]) -> f64 {
@@ -235,7 +236,7 @@ impl LinearGaussianSmc {
         let upper = cholesky_upper("R", &sub).expect("a principal block of a PD matrix is PD");
         let lower = row_major(&upper.transpose());
         let mut r: Vec<f64> = observed.iter().map(|&i| residual[i]).collect();
-        let norm2 = Self::whitened_norm2(&lower, k, &mut r);
+        let norm2 = whitened_norm2(&lower, k, &mut r);
         let half_logdet: f64 = (0..k).map(|i| upper[(i, i)].ln()).sum();
         -0.5 * k as f64 * LN_2PI - half_logdet - 0.5 * norm2
     }
@@ -271,7 +272,7 @@ impl InitialDensity for LinearGaussianSmc {
                 for ((ri, &xi), &mi) in r.iter_mut().zip(x).zip(&self.mu) {
                     *ri = xi - mi;
                 }
-                norm - 0.5 * Self::whitened_norm2(lower, self.n, r)
+                norm - 0.5 * whitened_norm2(lower, self.n, r)
             }
             None if x == self.mu.as_slice() => 0.0,
             None => f64::NEG_INFINITY,
@@ -301,7 +302,7 @@ impl LinearGaussianSmc {
         }
         out.copy_from_slice(prior_mean);
         Self::add_product(&guide.gain, p, e, out);
-        guide.log_norm_s - 0.5 * Self::whitened_norm2(&guide.s_lower, p, e)
+        guide.log_norm_s - 0.5 * whitened_norm2(&guide.s_lower, p, e)
     }
 
     /// The guided step from `x`: writes the mean of `p(x_{t+1} | x, y_next)` into `out`
@@ -441,7 +442,7 @@ impl ObservationDensity for LinearGaussianSmc {
         if y.iter().any(|v| v.is_nan()) {
             return self.partial_log_density(r, y);
         }
-        self.log_norm_r - 0.5 * Self::whitened_norm2(&self.r_lower, p, r)
+        self.log_norm_r - 0.5 * whitened_norm2(&self.r_lower, p, r)
     }
 }
 
@@ -454,7 +455,7 @@ impl TransitionDensity for LinearGaussianSmc {
         for (ri, &xi) in r.iter_mut().zip(next) {
             *ri = xi - *ri;
         }
-        self.log_norm_q - 0.5 * Self::whitened_norm2(&self.q_lower, n, r)
+        self.log_norm_q - 0.5 * whitened_norm2(&self.q_lower, n, r)
     }
 
     fn log_transition_matrix(
@@ -483,7 +484,7 @@ impl TransitionDensity for LinearGaussianSmc {
                 for ((ri, &xi), &mi) in r.iter_mut().zip(next).zip(mean) {
                     *ri = xi - mi;
                 }
-                *value = self.log_norm_q - 0.5 * Self::whitened_norm2(&self.q_lower, n, r);
+                *value = self.log_norm_q - 0.5 * whitened_norm2(&self.q_lower, n, r);
             }
         }
     }

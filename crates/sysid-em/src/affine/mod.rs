@@ -32,7 +32,7 @@ mod psaem;
 mod robust;
 mod stats;
 
-pub use model::{AffineModel, AffineParams};
+pub use model::{AffineModel, AffineParams, free_structure};
 pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{

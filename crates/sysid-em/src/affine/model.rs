@@ -74,7 +74,35 @@ pub trait AffineModel: Sync {
         vec![(0..self.regressor_dim()).collect(); self.output_dim()]
     }
 
+    /// The coefficients of each state row that are known: held at their values in the
+    /// parameters, never estimated nor perturbed (default: none). Each must be in the
+    /// row's [`state_structure`](Self::state_structure). For the known parts of a
+    /// model, such as a kinematic row `theta' = theta + dt omega` or the identity part
+    /// of an Euler step `omega' = omega + dt (...)`.
+    fn held_state_coefficients(&self) -> Vec<Vec<usize>> {
+        vec![Vec::new(); self.state_dim()]
+    }
+
+    /// The known coefficients of each output row (see
+    /// [`held_state_coefficients`](Self::held_state_coefficients)); default: none.
+    fn held_output_coefficients(&self) -> Vec<Vec<usize>> {
+        vec![Vec::new(); self.output_dim()]
+    }
+
     /// The SMC model at `params`; errors on invalid values (e.g. a non-positive
     /// variance).
     fn smc_model(&self, params: &AffineParams) -> Result<Self::Smc, AffineEmError>;
+}
+
+/// Each row's regressors whose coefficients are estimated: its structure without its
+/// held coefficients.
+pub fn free_structure(structure: &[Vec<usize>], held: &[Vec<usize>]) -> Vec<Vec<usize>> {
+    structure
+        .iter()
+        .enumerate()
+        .map(|(row, used)| {
+            let held = held.get(row).map(Vec::as_slice).unwrap_or(&[]);
+            used.iter().copied().filter(|j| !held.contains(j)).collect()
+        })
+        .collect()
 }

@@ -19,6 +19,8 @@ struct BlockInput<'a> {
     moments: &'a DMatrix<f64>,
     steps: f64,
     structure: &'a [Vec<usize>],
+    /// Per row, the regressors whose coefficients are held at `current_beta`.
+    held: &'a [Vec<usize>],
     estimate_beta: bool,
     covariance: Covariance,
     current_beta: &'a DMatrix<f64>,
@@ -39,11 +41,22 @@ fn fit_block(block: &BlockInput<'_>, regressors: usize) -> Result<BlockFit, Affi
         moments,
         steps,
         structure,
+        held,
         estimate_beta,
         covariance,
         current_beta,
         current_pi,
     } = *block;
+    let any_held = held.iter().any(|h| !h.is_empty());
+    if let Some((row, j)) = held.iter().enumerate().find_map(|(row, h)| {
+        h.iter()
+            .find(|j| !structure.get(row).is_some_and(|used| used.contains(j)))
+            .map(|&j| (row, j))
+    }) {
+        return Err(AffineEmError::InvalidParams(format!(
+            "{name}: row {row} holds the coefficient of regressor {j}, which the row does not use"
+        )));
+    }
     let rows = structure.len();
     if steps <= 0.0 {
         return Err(AffineEmError::NoSteps { block: name });
@@ -81,20 +94,39 @@ fn fit_block(block: &BlockInput<'_>, regressors: usize) -> Result<BlockFit, Affi
     let mut pi = DMatrix::zeros(rows, rows);
     if separate || rows == 1 {
         for (r, used) in structure.iter().enumerate() {
+            // held coefficients move to the left-hand side with their values
+            let row_held = held.get(r).map(Vec::as_slice).unwrap_or(&[]);
+            let known: Vec<(usize, DMatrix<f64>)> = row_held
+                .iter()
+                .map(|&j| (j, DMatrix::from_element(1, 1, current_beta[(r, j)])))
+                .collect();
+            let free: Vec<usize> = used
+                .iter()
+                .copied()
+                .filter(|j| !row_held.contains(j))
+                .collect();
             let fit = regress(
                 &factor,
                 &Block {
                     targets: regressors + r..regressors + r + 1,
-                    free: used.clone(),
-                    fixed: Vec::new(),
+                    free: free.clone(),
+                    fixed: known.iter().map(|(j, g)| (*j..*j + 1, g)).collect(),
                 },
                 steps,
             );
-            for (k, &j) in used.iter().enumerate() {
+            for (k, &j) in free.iter().enumerate() {
                 beta[(r, j)] = fit.coef[(0, k)];
+            }
+            for &(j, ref g) in &known {
+                beta[(r, j)] = g[(0, 0)];
             }
             pi[(r, r)] = fit.cov[(0, 0)];
         }
+    } else if any_held {
+        return Err(AffineEmError::Unsupported(format!(
+            "{name}: held coefficients need a diagonal noise covariance (one regression per \
+             row)"
+        )));
     } else if shared {
         let used = &structure[0];
         let fit = regress(
@@ -150,6 +182,7 @@ pub fn m_step<A: AffineModel>(
             moments: &stats.state,
             steps: stats.state_steps,
             structure: &state_structure,
+            held: &model.held_state_coefficients(),
             estimate_beta: spec.beta_x,
             covariance: spec.pi_x,
             current_beta: &current.beta_x,
@@ -163,6 +196,7 @@ pub fn m_step<A: AffineModel>(
             moments: &stats.output,
             steps: stats.output_steps,
             structure: &output_structure,
+            held: &model.held_output_coefficients(),
             estimate_beta: spec.beta_y,
             covariance: spec.pi_y,
             current_beta: &current.beta_y,

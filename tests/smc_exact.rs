@@ -289,6 +289,8 @@ fn same_seed_gives_identical_bits_with_one_and_four_threads() {
                 particles: 5000,
                 store_history: true,
                 parallel: true,
+                // the team itself, whatever else runs on the machine
+                share_busy_processors: true,
                 ..Default::default()
             })
             .unwrap();
@@ -519,6 +521,7 @@ fn the_filter_team_gives_the_sequential_bits_in_every_setting() {
                     ess_threshold,
                     store_history: true,
                     parallel: threads > 1,
+                    share_busy_processors: true,
                     record_summaries,
                 })
                 .unwrap();

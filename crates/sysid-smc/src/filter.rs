@@ -77,7 +77,7 @@ use crate::streams::{Rng, stream};
 use crate::systematic::{
     BlockPlan, BlockSums, Marks, block_running_sums, last_positive, mark_block, plan_blocks,
 };
-use crate::team::{Team, member_chunks};
+use crate::team::Team;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{max_value, sum_of_squares};
 use crate::{History, Series, SmcError};
@@ -103,6 +103,13 @@ pub struct FilterOptions {
     /// not depend on it. Pays from a few chunks up (M = 10 000 on two threads: about 1.6x);
     /// leave it off when independent runs already fill the cores. Default false.
     pub parallel: bool,
+    /// With `parallel`, use every thread of the pool even when the machine's
+    /// processors are busy. Default false: the team is only as large as the processors
+    /// free when the run starts (on Linux; elsewhere the pool's size), because a
+    /// helper sharing a processor with another process made the filter slower than
+    /// one thread (M = 10 000 on two processors, one busy: 1.4 to 6 times). Tests of
+    /// the team set it.
+    pub share_busy_processors: bool,
     /// Record the filtered mean and the effective sample size of every step
     /// ([`ParticleFilter::means`], [`ParticleFilter::ess`]). Default true. Estimators
     /// that need only the log-likelihood (PMMH) switch it off, which saves two passes
@@ -118,6 +125,7 @@ impl Default for FilterOptions {
             ess_threshold: 1.0,
             store_history: false,
             parallel: false,
+            share_busy_processors: false,
             record_summaries: true,
         }
     }
@@ -238,8 +246,18 @@ impl ParticleFilter {
         seed: u64,
     ) -> Result<FilterSummary, SmcError> {
         self.prepare(model.state_dim(), data.steps(), seed);
-        let members = if self.options.parallel {
-            rayon::current_num_threads().min(self.rngs.len())
+        // a helper without a processor of its own slows the team down (another
+        // process, or the caller's other threads, e.g. parallel PMMH chains, are busy):
+        // the team is only as large as the processors free now
+        let members = if self.options.parallel && self.rngs.len() > 1 {
+            // (looked at before rayon's pool is touched: a pool that starts now has
+            // its threads running for a moment)
+            let free = if self.options.share_busy_processors {
+                usize::MAX
+            } else {
+                crate::busy::free_processors().unwrap_or(usize::MAX)
+            };
+            rayon::current_num_threads().min(self.rngs.len()).min(free)
         } else {
             1
         };
@@ -252,16 +270,16 @@ impl ParticleFilter {
                 team: None,
             });
         }
-        let team = Team::new(members);
+        let team = Team::new();
         std::thread::scope(|scope| {
-            for member in 1..members {
+            for _ in 1..members {
                 let team = &team;
                 scope.spawn(move || {
-                    team.serve(|command: Command| {
-                        let chunks = member_chunks(member, members, command.buffers.chunks);
-                        // SAFETY: between the leader's `start` and `wait` this member
-                        // alone touches its chunks (see `SharedBuffers`)
-                        unsafe { command.run_chunks(model, data, chunks, true) }
+                    team.serve(|command: Command, chunk| {
+                        // SAFETY: this member claimed the chunk: until the leader's
+                        // `run` returns it alone touches the chunk's entries (see
+                        // `SharedBuffers`)
+                        unsafe { command.run_chunks(model, data, (chunk, chunk + 1), true) }
                     })
                 });
             }
@@ -396,13 +414,11 @@ impl ParticleFilter {
         let chunks = command.buffers.chunks;
         match team {
             Some(team) => {
-                team.start(command);
-                // SAFETY: until `wait` returns, the helpers touch only their own chunks
-                // and the leader touches the buffers only through `command`
-                unsafe {
-                    command.run_chunks(model, data, member_chunks(0, team.members(), chunks), false)
-                };
-                team.wait();
+                // SAFETY: until `run` returns, every member touches only the chunks it
+                // claimed, and the leader touches the buffers only through `command`
+                team.run(command, chunks, |command, chunk| unsafe {
+                    command.run_chunks(model, data, (chunk, chunk + 1), false)
+                });
             }
             // SAFETY: no other thread holds the buffers
             None => unsafe { command.run_chunks(model, data, (0, chunks), false) },
@@ -604,8 +620,8 @@ struct Command {
 
 /// The buffers of one step as raw parts, shared by the members of a filter team.
 ///
-/// Between the leader's `Team::start` and `Team::wait` each member writes only the
-/// entries of its own chunks (states, log-densities, log-weights, weights, running
+/// During the leader's `Team::run` each member writes only the entries of the chunks
+/// it claimed (states, log-densities, log-weights, weights, running
 /// sums, generator, chunk sums and means) and its chunks' slot ranges of the next
 /// ancestors; every member reads `previous`, `ancestors`, `plan` and the data, which
 /// nothing writes in that window. Outside it the leader owns every buffer.

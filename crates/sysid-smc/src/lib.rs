@@ -23,6 +23,7 @@
 //! Schön, Wills and Ninness (2006); Lindsten and Schön (2013), *Backward simulation
 //! methods for Monte Carlo statistical inference*; Chopin and Papaspiliopoulos (2020).
 
+mod busy;
 pub mod conditional;
 mod error;
 pub mod filter;

@@ -135,6 +135,7 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
         ess_threshold: a.ess,
         store_history,
         parallel: crate::threads() > 1,
+        share_busy_processors: false,
         record_summaries: true,
     };
     options.check().map_err(option_error)?;

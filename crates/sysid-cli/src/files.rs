@@ -632,11 +632,49 @@ pub fn parse_data(
     })
 }
 
-/// Formats a float for CSV: shortest round-trip representation, `NaN` for missing.
+/// Formats a float for CSV and messages: the shortest representation that reads back
+/// to the same bits, in scientific notation outside `[1e-5, 1e16)` (Rust's `{}` wrote
+/// 1e-300 with 300 digits and 1.8e150 as a 151-digit integer), `0` for both zeros,
+/// `NaN` for missing.
 pub fn fmt(v: f64) -> String {
     if v.is_nan() {
         "NaN".to_string()
-    } else {
+    } else if v == 0.0 {
+        "0".to_string()
+    } else if v.is_infinite() || (1e-5..1e16).contains(&v.abs()) {
         format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+#[cfg(test)]
+mod format_tests {
+    use super::fmt;
+
+    /// Every value reads back to the same bits, and the extremes stay short.
+    #[test]
+    fn numbers_are_short_and_round_trip() {
+        for (v, text) in [
+            (1e-300, "1e-300"),
+            (1.8e150, "1.8e150"),
+            (-0.0, "0"),
+            (0.1 + 0.2, "0.30000000000000004"),
+            (12345.5, "12345.5"),
+            (-2.5e-7, "-2.5e-7"),
+            (f64::INFINITY, "inf"),
+            (f64::NAN, "NaN"),
+        ] {
+            assert_eq!(fmt(v), text);
+        }
+        let mut x = 1.2345e-320_f64;
+        while x < 1e300 {
+            for v in [x, -x, x * std::f64::consts::PI] {
+                let back: f64 = fmt(v).parse().unwrap();
+                assert_eq!(back.to_bits(), v.to_bits(), "{v:e}");
+                assert!(fmt(v).len() <= 24, "{}", fmt(v));
+            }
+            x *= 7.77;
+        }
     }
 }

@@ -286,7 +286,7 @@ impl DataFile {
         if self.output_names.is_empty() {
             return Err(CliError::NoOutputColumn {
                 path: path.to_path_buf(),
-                available: self.columns.join(", "),
+                available: column_list(&self.columns),
             });
         }
         Ok(())
@@ -362,12 +362,28 @@ fn select(
                     .ok_or_else(|| CliError::UnknownColumn {
                         path: path.to_path_buf(),
                         column: name.clone(),
-                        available: header.join(", "),
+                        available: column_list(header),
                     })
             })
             .collect(),
     }
 }
+
+/// A file's column names for a message: all of them up to [`LISTED_COLUMNS`], else the
+/// first ones and the count (a message stays one readable line).
+pub fn column_list(names: &[String]) -> String {
+    if names.len() <= LISTED_COLUMNS {
+        return names.join(", ");
+    }
+    format!(
+        "{}, ... ({} columns)",
+        names[..LISTED_COLUMNS].join(", "),
+        names.len()
+    )
+}
+
+/// The most column names a message lists.
+const LISTED_COLUMNS: usize = 20;
 
 /// A CSV row with its line number.
 pub type NumberedRow = (u64, csv::StringRecord);
@@ -426,10 +442,12 @@ pub fn parse_rows(
             path: path.to_path_buf(),
         });
     }
+    // one pass with a set (the pairwise search took 17.7 s on 100 000 columns)
+    let mut seen = std::collections::HashSet::with_capacity(header.len());
     if let Some((i, name)) = header
         .iter()
         .enumerate()
-        .find(|(i, h)| header[..*i].contains(h))
+        .find(|(_, h)| !seen.insert(h.as_str()))
     {
         return Err(CliError::DuplicateColumn {
             path: path.to_path_buf(),
@@ -513,7 +531,7 @@ pub fn parse_data(
     if input_cols.is_empty() && output_cols.is_empty() {
         return Err(CliError::NoSignalColumns {
             path: path.to_path_buf(),
-            available: header.join(", "),
+            available: column_list(&header),
         });
     }
     let time_col = header

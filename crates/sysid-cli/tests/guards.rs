@@ -429,3 +429,53 @@ fn missing_inputs_and_bad_filter_flags_are_bad_input_named_as_typed() {
     }
     assert!(!dir.join("f.json").exists());
 }
+
+/// A file with 100 000 columns: its column list in a message is cut to a readable
+/// line (it was 789 kB), a name repeated at the far end is found in one pass (the
+/// pairwise search took seconds), and `plot` refuses a figure of 100 000 panels
+/// (plotters panicked asking for a 12 GB bitmap) with exit 2 and no file.
+#[test]
+fn a_file_with_a_hundred_thousand_columns_gets_short_messages_and_no_panic() {
+    let dir = scratch_dir();
+    let columns = 100_000;
+    let names: Vec<String> = (0..columns).map(|i| format!("c{i}")).collect();
+    let wide = dir.join("wide.csv");
+    let ones = vec!["1"; columns + 1].join(",");
+    std::fs::write(&wide, format!("t,{}\n{ones}\n{ones}\n", names.join(","))).unwrap();
+    let model = dir.join("m.json");
+    let out = sysid(&[
+        "n4sid",
+        "--data",
+        s(&wide),
+        "--order",
+        "1",
+        "--out",
+        s(&model),
+    ]);
+    assert_one_line_error(&out, &["the file has t, c0, c1", "(100001 columns)"]);
+    assert!(out.stderr.len() < 600, "{} bytes", out.stderr.len());
+    let repeated = dir.join("repeated.csv");
+    std::fs::write(
+        &repeated,
+        format!("t,y1,{},y1\n1,1,{ones}\n", names[..columns - 2].join(",")),
+    )
+    .unwrap();
+    assert_one_line_error(
+        &sysid(&[
+            "n4sid",
+            "--data",
+            s(&repeated),
+            "--order",
+            "1",
+            "--out",
+            s(&model),
+        ]),
+        &["column 100001 repeats the name \"y1\""],
+    );
+    let figures = dir.join("figs");
+    assert_one_line_error(
+        &sysid(&["plot", s(&wide), "--out-dir", s(&figures)]),
+        &["100000 panels", "at most 64"],
+    );
+    assert!(!figures.exists() || entries(&figures).is_empty());
+}

@@ -79,6 +79,13 @@ pub fn png(figure: &Figure, target: &Path, overwrite: bool) -> Result<(), PlotEr
 /// Every panel has something to draw, on axes that are not too wide (the tick search
 /// of a range near `f64::MAX` does not end).
 fn check_data(figure: &Figure) -> Result<(), PlotError> {
+    // a figure grows with its panels: 100 000 columns asked for a 12 GB bitmap
+    if figure.panels.len() > MAX_PANELS {
+        return Err(PlotError::TooManyPanels {
+            panels: figure.panels.len(),
+            max: MAX_PANELS,
+        });
+    }
     for panel in &figure.panels {
         let Some((x, y)) = ranges(panel) else {
             return Err(PlotError::NoData {
@@ -144,6 +151,9 @@ fn ranges(panel: &Panel) -> Option<((f64, f64), (f64, f64))> {
 
 /// The widest axis range drawn.
 const MAX_WIDTH: f64 = 1e307;
+
+/// The most panels one figure takes (its size grows with them).
+pub const MAX_PANELS: usize = 64;
 
 fn pad((lo, hi): (f64, f64), scale: Scale, margin: bool) -> (f64, f64) {
     let share = if margin { 0.04 } else { 0.0 };

@@ -56,6 +56,16 @@ pub enum PlotError {
         /// The upper end.
         hi: f64,
     },
+    /// More panels than one figure can hold (one per column of a wide file).
+    #[error(
+        "{panels} panels asked for one figure (one per column); at most {max}: plot a file with fewer columns"
+    )]
+    TooManyPanels {
+        /// The panels asked for.
+        panels: usize,
+        /// The most a figure takes.
+        max: usize,
+    },
     /// The drawing library failed.
     #[error("{path}: drawing failed: {message}")]
     Draw {

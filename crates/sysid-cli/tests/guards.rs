@@ -479,3 +479,41 @@ fn a_file_with_a_hundred_thousand_columns_gets_short_messages_and_no_panic() {
     );
     assert!(!figures.exists() || entries(&figures).is_empty());
 }
+
+/// `plot --truth` with a record that does not cover the states' times is an error
+/// naming both spans (it was drawn over part of the window in silence); the record the
+/// states came from is accepted.
+#[test]
+fn a_truth_that_does_not_cover_the_states_is_refused() {
+    let dir = scratch_dir();
+    let long = dir.join("long.csv");
+    let short = dir.join("short.csv");
+    for (path, steps) in [(&long, "100"), (&short, "50")] {
+        assert_ok(&sysid(&[
+            "simulate",
+            "nlbench",
+            "--steps",
+            steps,
+            "--states",
+            "--out",
+            s(path),
+        ]));
+    }
+    let figures = dir.join("figs");
+    let plot = |truth: &std::path::Path| {
+        sysid(&[
+            "plot",
+            s(&long),
+            "--kind",
+            "states",
+            "--truth",
+            s(truth),
+            "--out-dir",
+            s(&figures),
+            "--force",
+        ])
+    };
+    assert_one_line_error(&plot(&short), &["--truth", "from 1 to 50", "from 1 to 100"]);
+    assert!(!figures.exists() || entries(&figures).is_empty());
+    assert_ok(&plot(&long));
+}

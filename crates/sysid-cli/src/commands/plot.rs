@@ -161,7 +161,34 @@ fn trace_figure(path: &Path) -> Result<Figure, CliError> {
 fn states_figure(path: &Path, truth: Option<&Path>) -> Result<Figure, CliError> {
     let (header, columns) = read_columns(path)?;
     let t = abscissa(&header, &columns, "t");
+    let truth_path = truth;
     let truth = truth.map(read_columns).transpose()?;
+    // the truth is drawn at its own times: it must cover the estimates' (a record of
+    // another length used to be drawn over part of the window, in silence)
+    if let (Some((th, tc)), Some(path)) = (&truth, truth_path) {
+        let tt = abscissa(th, tc, "t");
+        let span = |v: &[f64]| {
+            v.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        let ((lo, hi), (tlo, thi)) = (span(&t), span(&tt));
+        if !t.is_empty() && (tt.is_empty() || tlo > lo || thi < hi) {
+            return Err(CliError::BadOption {
+                option: "--truth",
+                message: format!(
+                    "{}: its times run from {} to {}, the states' from {} to {}: give the \
+                     record the states were estimated from",
+                    path.display(),
+                    crate::files::fmt(tlo),
+                    crate::files::fmt(thi),
+                    crate::files::fmt(lo),
+                    crate::files::fmt(hi)
+                ),
+            });
+        }
+    }
     let mut panels = Vec::new();
     for i in 1.. {
         let name = format!("x{i}");

@@ -12,6 +12,8 @@
 //!   sat on a handful of particles: an effective sample size below [`LOST_FRACTION`]
 //!   of M (between 1.5 and 5). A single such step is an outlying observation.
 
+use super::particle::ParticleArgs;
+use crate::files::fmt;
 use serde_json::json;
 use sysid::smc::{FilterModel, FilterOptions, ParticleFilter, Series, stream};
 
@@ -77,19 +79,19 @@ impl FilterTrust {
     }
 }
 
-/// Diagnoses a run with log-likelihood `loglik` and per-step ESS `ess` (the run's
-/// filter), running `repeats` more filters with `options` on streams derived from
-/// `seed`. `time_label` names step `t` in the messages (the data file's time).
+/// Diagnoses the run of `pf` (log-likelihood `loglik`): its ESS, and `args.repeats`
+/// more filters with the same options on streams derived from `args.seed`. `time`
+/// names the steps in the messages (the data file's time; row numbers without one).
 pub(crate) fn diagnose<M: FilterModel + Sync>(
     model: &M,
     series: &Series<'_>,
-    options: &FilterOptions,
-    seed: u64,
-    run: (f64, &[f64]),
-    repeats: usize,
-    time_label: impl Fn(usize) -> String,
+    pf: &ParticleFilter,
+    loglik: f64,
+    args: &ParticleArgs,
+    time: &[f64],
 ) -> FilterTrust {
-    let (loglik, ess) = run;
+    let (options, ess, seed, repeats) = (pf.options(), pf.ess(), args.seed, args.repeats);
+    let time_label = |t: usize| time.get(t).map_or_else(|| (t + 1).to_string(), |v| fmt(*v));
     let particles = options.particles;
     let mut warnings = Vec::new();
     let min_ess = ess

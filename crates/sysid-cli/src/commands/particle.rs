@@ -251,19 +251,7 @@ fn filter_with<M: FilterModel + Sync>(
     let run = pf
         .run(model, &series, a.seed)
         .map_err(smc_error(&context))?;
-    let trust = super::filter_trust::diagnose(
-        model,
-        &series,
-        pf.options(),
-        a.seed,
-        (run.loglik, pf.ess()),
-        a.repeats,
-        |t| {
-            file.time
-                .get(t)
-                .map_or_else(|| (t + 1).to_string(), |v| fmt(*v))
-        },
-    );
+    let trust = super::filter_trust::diagnose(model, &series, &pf, run.loglik, a, &file.time);
     let seconds = start.elapsed().as_secs_f64();
     write_states(a, &file.time, model.state_dim(), pf.means(), None)?;
     if a.json {
@@ -384,19 +372,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     })()?;
     // the smoothed paths are drawn from the filter's particles: a filter that lost the
     // state smooths the wrong trajectory there
-    let trust = super::filter_trust::diagnose(
-        model,
-        &series,
-        pf.options(),
-        c.seed,
-        (run.loglik, pf.ess()),
-        c.repeats,
-        |t| {
-            file.time
-                .get(t)
-                .map_or_else(|| (t + 1).to_string(), |v| fmt(*v))
-        },
-    );
+    let trust = super::filter_trust::diagnose(model, &series, &pf, run.loglik, c, &file.time);
     let seconds = start.elapsed().as_secs_f64();
     let (means, sds) = (paths.means(), paths.std_devs());
     write_states(c, &file.time, model.state_dim(), &means, Some(&sds))?;

@@ -12,7 +12,9 @@
 //! * [`em`]: the EM runner and exact EM for linear Gaussian models;
 //! * [`pmcmc`]: Bayesian identification: PMMH and particle Gibbs (ancestor sampling,
 //!   backward simulation), priors, parallel chains and diagnostics;
-//! * [`models`]: the canonical systems of the source papers.
+//! * [`models`]: the canonical systems of the source papers;
+//! * [`modelfile`]: your own nonlinear model from a model file (equations as
+//!   expressions), for every particle method.
 //!
 //! # Example
 //! ```
@@ -27,6 +29,7 @@
 pub use sysid_em as em;
 pub use sysid_kalman as kalman;
 pub use sysid_linalg as linalg;
+pub use sysid_modelfile as modelfile;
 pub use sysid_models as models;
 pub use sysid_pmcmc as pmcmc;
 pub use sysid_smc as smc;

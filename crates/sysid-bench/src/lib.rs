@@ -7,6 +7,7 @@
 //! cargo run --release -p sysid-bench -- smc [--reps 21]
 //! cargo run --release -p sysid-bench -- nlbench-em [--runs 200 --iters 1000 --particles 50 --shard 0/2]
 //! cargo run --release -p sysid-bench -- pendulum-em [--runs 50 --method robust]
+//! cargo run --release -p sysid-bench -- modelfile-em [--runs 20 --iters 200]
 //! cargo run --release -p sysid-bench -- pmcmc [--reps 11]
 //! cargo run --release -p sysid-bench -- wiener [--runs 100 --iters 100 --particles 100 --csv-dir out/]
 //! ```
@@ -14,6 +15,7 @@
 mod em;
 mod kalman;
 mod lti2x2;
+mod modelfile_em;
 mod nlbench_em;
 mod pendulum_em;
 mod pmcmc;
@@ -63,6 +65,10 @@ pub enum Runner {
     /// Particle EM beyond nlbench: the driven pendulum (two states, three physical coefficients)
     /// from starts at +-50 %, robust driver or the paper's algorithm.
     PendulumEm(pendulum_em::Args),
+    /// nlbench as a model file against the built-in nlbench under the same particle EM
+    /// (same data, starts and seeds; medians of a, b, c, d with bootstrap standard
+    /// errors).
+    ModelfileEm(modelfile_em::Args),
     /// Merges the outputs of `nlbench-em` shards into one set of run lines and summary.
     NlbenchEmMerge {
         /// JSON-lines files written by `nlbench-em --shard i/n`.
@@ -128,6 +134,7 @@ pub fn run(runner: Runner) -> Result<(), String> {
         Runner::Wiener(args) => wiener::run(&args)?,
         Runner::NlbenchEm(args) => nlbench_em::run(&args)?,
         Runner::PendulumEm(args) => pendulum_em::run(&args)?,
+        Runner::ModelfileEm(args) => modelfile_em::run(&args)?,
         Runner::NlbenchEmMerge { files } => nlbench_em::merge(&files)?,
         Runner::NlbenchEmFigure {
             runs,

@@ -123,6 +123,34 @@ pub fn run(reps: usize) {
             (STEPS * particles) as f64,
         );
     }
+    // the same filter on nlbench written as a model file (the compiled expressions)
+    // against the hand-written model, alternating in one run: the ratio of medians
+    let file = sysid::modelfile::builtin::model("nlbench")
+        .expect("shipped")
+        .expect("valid");
+    let from_file = file.at(&file.free_values()).expect("valid values");
+    let mut pf = filter(1000, false, false);
+    let (mut builtin_ms, mut file_ms) = (Vec::new(), Vec::new());
+    for r in 0..reps as u64 {
+        builtin_ms.extend(time_ms(1, |_| {
+            pf.run(&model, &data, r).expect("filter");
+        }));
+        file_ms.extend(time_ms(1, |_| {
+            pf.run(&from_file, &data, r).expect("filter");
+        }));
+    }
+    let (builtin_median, _, _) = crate::summary(&mut builtin_ms.clone());
+    let (file_median, _, _) = crate::summary(&mut file_ms.clone());
+    let params = json!({"system": "nlbench model file", "T": STEPS, "M": 1000, "threads": 1,
+        "builtin_ms_median": builtin_median, "ratio_to_builtin": file_median / builtin_median});
+    report.line(
+        "pf_model_file",
+        params,
+        file_ms,
+        2.0 * builtin_median,
+        (STEPS * 1000) as f64,
+    );
+
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
         .build()

@@ -4,24 +4,100 @@
 //! one with bounds).
 //!
 //! # Algorithm
-//! The three log-densities are those of [`ExprSmc`] at the parameters; `Q`'s gradient
-//! is by central differences (`Gradients::FiniteDifferences`).
+//! The three log-densities are those of [`ExprSmc`] at the parameters. Their gradients
+//! are analytic: every expression is differentiated symbolically with respect to each
+//! free parameter once ([`Expr::derivative`]), and each Gaussian term contributes
+//! ```text
+//! d log N(z; m, v) = (z - m)/v dm + ((z - m)^2/v^2 - 1/v)/2 dv
+//! ```
+//! times `d theta / d z` of the parameter's transform.
 
+use crate::expr::{Expr, Var};
 use crate::{ExprSmc, ModelFile};
-use sysid_em::gradient::{GradientEmError, GradientModel};
+use sysid_em::gradient::{GradientEmError, GradientModel, Gradients};
 use sysid_pmcmc::{ModelFamily, Support};
+
+/// `d e / d theta_j` for every free parameter `j` that `e` depends on.
+type Partials = Vec<(usize, Expr)>;
+
+fn partials(e: &Expr, free: &[usize]) -> Partials {
+    free.iter()
+        .enumerate()
+        .filter_map(|(j, &k)| {
+            let d = e.derivative(Var::Param(k));
+            (d.node != crate::expr::Node::Num(0.0)).then_some((j, d))
+        })
+        .collect()
+}
+
+/// The partial derivatives of every expression of a model.
+#[derive(Debug, Clone)]
+struct Derivatives {
+    transition: Vec<Partials>,
+    observation: Vec<Partials>,
+    process: Vec<Partials>,
+    measurement: Vec<Partials>,
+    initial_mean: Vec<Partials>,
+    initial_variance: Vec<Partials>,
+}
 
 /// A model file for gradient EM (see the module documentation).
 #[derive(Debug, Clone)]
 pub struct ExprGradient {
     file: ModelFile,
     supports: Vec<Support>,
+    derivatives: Derivatives,
+}
+
+/// The model at the parameters and `d theta_j / d z_j` of each free parameter.
+#[derive(Debug, Clone)]
+pub struct Unpacked {
+    model: ExprSmc,
+    jacobian: Vec<f64>,
+}
+
+/// Adds the gradient of `log N(z; m, v)` (with `dm`, `dv` the partials of the mean and
+/// variance, evaluated by `eval`) into `grad`, scaled by the transform's jacobian.
+#[allow(clippy::too_many_arguments)]
+fn gaussian_gradient(
+    z: f64,
+    m: f64,
+    v: f64,
+    dm: &Partials,
+    dv: &Partials,
+    eval: &impl Fn(&Expr) -> f64,
+    jacobian: &[f64],
+    grad: &mut [f64],
+) {
+    let r = z - m;
+    for (j, d) in dm {
+        grad[*j] += r / v * eval(d) * jacobian[*j];
+    }
+    let w = 0.5 * (r * r / (v * v) - 1.0 / v);
+    for (j, d) in dv {
+        grad[*j] += w * eval(d) * jacobian[*j];
+    }
 }
 
 impl ExprGradient {
     pub(crate) fn new(file: ModelFile) -> ExprGradient {
         let supports = file.supports();
-        ExprGradient { file, supports }
+        let spec = file.spec();
+        let free = spec.free();
+        let all = |es: &[Expr]| es.iter().map(|e| partials(e, &free)).collect();
+        let derivatives = Derivatives {
+            transition: all(&spec.transition),
+            observation: all(&spec.observation),
+            process: all(&spec.process_noise),
+            measurement: all(&spec.measurement_noise),
+            initial_mean: all(&spec.initial_mean),
+            initial_variance: all(&spec.initial_variance),
+        };
+        ExprGradient {
+            file,
+            supports,
+            derivatives,
+        }
     }
 
     /// The unconstrained vector of the free parameters `values` (each inside its
@@ -44,7 +120,7 @@ impl GradientModel for ExprGradient {
     type Smc = ExprSmc;
     /// The model at the parameters, or `None` where they give an invalid law (a
     /// variance expression that is not positive): its densities are then `-inf`.
-    type Params = Option<ExprSmc>;
+    type Params = Option<Unpacked>;
 
     fn parameter_dim(&self) -> usize {
         self.supports.len()
@@ -67,17 +143,28 @@ impl GradientModel for ExprGradient {
             .at(&self.constrained(theta))
             .map_err(GradientEmError::InvalidParams)
     }
-    fn unpack(&self, theta: &[f64]) -> Option<ExprSmc> {
-        self.file.at(&self.constrained(theta)).ok()
+    fn unpack(&self, theta: &[f64]) -> Option<Unpacked> {
+        let model = self.file.at(&self.constrained(theta)).ok()?;
+        let jacobian = self
+            .supports
+            .iter()
+            .zip(theta)
+            .map(|(s, &z)| s.from_unconstrained(z).1.exp())
+            .collect();
+        Some(Unpacked { model, jacobian })
+    }
+    fn gradients(&self) -> Gradients {
+        Gradients::Analytic
     }
 
-    fn log_initial(&self, p: &Option<ExprSmc>, x: &[f64]) -> f64 {
+    fn log_initial(&self, p: &Option<Unpacked>, x: &[f64]) -> f64 {
         use sysid_smc::InitialDensity;
-        p.as_ref().map_or(f64::NEG_INFINITY, |m| m.log_initial(x))
+        p.as_ref()
+            .map_or(f64::NEG_INFINITY, |p| p.model.log_initial(x))
     }
     fn log_transition(
         &self,
-        p: &Option<ExprSmc>,
+        p: &Option<Unpacked>,
         t: usize,
         x: &[f64],
         u: &[f64],
@@ -85,11 +172,11 @@ impl GradientModel for ExprGradient {
     ) -> f64 {
         use sysid_smc::TransitionDensity;
         p.as_ref()
-            .map_or(f64::NEG_INFINITY, |m| m.log_transition(t, x, u, next))
+            .map_or(f64::NEG_INFINITY, |p| p.model.log_transition(t, x, u, next))
     }
     fn log_observation(
         &self,
-        p: &Option<ExprSmc>,
+        p: &Option<Unpacked>,
         t: usize,
         x: &[f64],
         u: &[f64],
@@ -97,6 +184,105 @@ impl GradientModel for ExprGradient {
     ) -> f64 {
         use sysid_smc::ObservationDensity;
         p.as_ref()
-            .map_or(f64::NEG_INFINITY, |m| m.log_observation(t, x, u, y))
+            .map_or(f64::NEG_INFINITY, |p| p.model.log_observation(t, x, u, y))
     }
+
+    fn log_initial_gradient(&self, p: &Option<Unpacked>, x: &[f64], grad: &mut [f64]) -> f64 {
+        let value = self.log_initial(p, x);
+        let Some(p) = p else { return value };
+        let (means, variances) = p.model.initial_law();
+        let eval = |e: &Expr| p.model.eval(e, 0, &[], &[]);
+        let d = &self.derivatives;
+        for i in 0..x.len() {
+            // a point mass (variance 0) has no gradient
+            if variances[i] > 0.0 {
+                gaussian_gradient(
+                    x[i],
+                    means[i],
+                    variances[i],
+                    &d.initial_mean[i],
+                    &d.initial_variance[i],
+                    &eval,
+                    &p.jacobian,
+                    grad,
+                );
+            }
+        }
+        value
+    }
+
+    fn log_transition_gradient(
+        &self,
+        p: &Option<Unpacked>,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        next: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
+        let Some(p) = p else {
+            return f64::NEG_INFINITY;
+        };
+        let eval = |e: &Expr| p.model.eval(e, t, u, x);
+        let variances = p.model.process_variances();
+        let d = &self.derivatives;
+        let mut value = 0.0;
+        for (i, f) in self.file.spec().transition.iter().enumerate() {
+            let (m, v) = (eval(f), variances[i]);
+            value += log_normal(next[i], m, v);
+            gaussian_gradient(
+                next[i],
+                m,
+                v,
+                &d.transition[i],
+                &d.process[i],
+                &eval,
+                &p.jacobian,
+                grad,
+            );
+        }
+        value
+    }
+
+    fn log_observation_gradient(
+        &self,
+        p: &Option<Unpacked>,
+        t: usize,
+        x: &[f64],
+        u: &[f64],
+        y: &[f64],
+        grad: &mut [f64],
+    ) -> f64 {
+        let Some(p) = p else {
+            return f64::NEG_INFINITY;
+        };
+        let eval = |e: &Expr| p.model.eval(e, t, u, x);
+        let variances = p.model.measurement_variances();
+        let d = &self.derivatives;
+        let mut value = 0.0;
+        for (j, g) in self.file.spec().observation.iter().enumerate() {
+            if y[j].is_nan() {
+                continue;
+            }
+            let (m, v) = (eval(g), variances[j]);
+            value += log_normal(y[j], m, v);
+            gaussian_gradient(
+                y[j],
+                m,
+                v,
+                &d.observation[j],
+                &d.measurement[j],
+                &eval,
+                &p.jacobian,
+                grad,
+            );
+        }
+        value
+    }
+}
+
+/// `log N(z; m, v)`.
+fn log_normal(z: f64, m: f64, v: f64) -> f64 {
+    let r = z - m;
+    -0.5 * (sysid_linalg::LN_2PI + v.ln()) - 0.5 * r * r / v
 }

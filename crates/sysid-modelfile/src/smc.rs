@@ -36,6 +36,7 @@ impl Compiled {
 /// A Gaussian variance with its log-normaliser.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Variance {
+    var: f64,
     sd: f64,
     kernel: ScalarGaussianKernel,
 }
@@ -43,6 +44,7 @@ struct Variance {
 impl Variance {
     fn new(v: f64) -> Variance {
         Variance {
+            var: v,
             sd: v.sqrt(),
             kernel: ScalarGaussianKernel::with_variance(v),
         }
@@ -136,9 +138,79 @@ impl ExprSmc {
         &self.values
     }
 
+    /// Simulates `steps` samples with the inputs `inputs` (time-major, `steps x m`;
+    /// empty without inputs) from the random stream `(seed, 0)`: per step the
+    /// measurement noise, then the process noise. Returns the states and the outputs,
+    /// time-major (`steps x n`, `steps x p`).
+    ///
+    /// # Errors
+    /// `inputs` of the wrong length, or a state or output that is not finite (the
+    /// model diverged: the message gives the step).
+    pub fn simulate(
+        &self,
+        steps: usize,
+        inputs: &[f64],
+        seed: u64,
+    ) -> Result<(Vec<f64>, Vec<f64>), String> {
+        let (n, p, m) = (self.state_dim(), self.output_dim(), self.input_dim());
+        if inputs.len() != steps * m {
+            return Err(format!(
+                "{} input values given for {steps} steps of {m} inputs",
+                inputs.len()
+            ));
+        }
+        let mut rng = sysid_smc::stream(seed, 0);
+        let mut x = vec![0.0; n];
+        self.sample_initial(&mut x, &mut rng);
+        let mut states = Vec::with_capacity(steps * n);
+        let mut outputs = Vec::with_capacity(steps * p);
+        let mut next = vec![0.0; n];
+        for t in 0..steps {
+            let u = &inputs[t * m..(t + 1) * m];
+            states.extend_from_slice(&x);
+            {
+                let lookup = self.lookup(t, u, &x);
+                for (g, noise) in self.compiled.spec.observation.iter().zip(&self.measurement) {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    outputs.push(g.eval(&lookup) + noise.sd * z);
+                }
+            }
+            self.sample_transition(t, &x, u, &mut next, &mut rng);
+            if let Some(bad) = next
+                .iter()
+                .chain(&outputs[t * p..])
+                .find(|v| !v.is_finite())
+            {
+                return Err(format!("the simulation diverged at step {t} (value {bad})"));
+            }
+            std::mem::swap(&mut x, &mut next);
+        }
+        Ok((states, outputs))
+    }
+
     /// Number of outputs.
     pub fn output_dim(&self) -> usize {
         self.measurement.len()
+    }
+
+    /// The value of `e` at state `x`, input `u`, time `t` and these parameters.
+    pub(crate) fn eval(&self, e: &crate::expr::Expr, t: usize, u: &[f64], x: &[f64]) -> f64 {
+        e.eval(&self.lookup(t, u, x))
+    }
+
+    /// The process-noise variances.
+    pub(crate) fn process_variances(&self) -> Vec<f64> {
+        self.process.iter().map(|v| v.var).collect()
+    }
+
+    /// The measurement-noise variances.
+    pub(crate) fn measurement_variances(&self) -> Vec<f64> {
+        self.measurement.iter().map(|v| v.var).collect()
+    }
+
+    /// The initial means and variances.
+    pub(crate) fn initial_law(&self) -> (&[f64], &[f64]) {
+        (&self.initial_mean, &self.initial_var)
     }
 
     /// Number of inputs.

@@ -98,6 +98,10 @@ pub enum CliError {
         context: String,
         source: KalmanError,
     },
+    /// A nonlinear model file that cannot be used (its line and column are in the
+    /// message).
+    #[error("{0}")]
+    ModelFile(#[from] sysid::modelfile::ModelFileError),
     #[error("unknown system {name:?} (known: {known})")]
     UnknownSystem { name: String, known: String },
     #[error("{option}: {message}")]

@@ -29,8 +29,16 @@ pub struct Options {
     /// Model class: `lti` (linear Gaussian state space, exact EM), `nlbench` (the
     /// seed-000 benchmark, particle EM), `affine` (particle EM for an affine model:
     /// `--system nlbench`, or a linear model given by `--init FILE`) or `wiener`
-    /// (blind Wiener identification from y1, y2 by gradient EM, seed 001).
-    pub kind: String,
+    /// (blind Wiener identification from y1, y2 by gradient EM, seed 001). Leave it
+    /// out with `--model`.
+    #[arg(required_unless_present = "model")]
+    pub kind: Option<String>,
+    /// A nonlinear model file (`.toml`, docs/model-format.md) whose free parameters
+    /// are estimated from their values in the file: closed-form particle EM when the
+    /// equations are affine in them (`--method robust` or `em`), gradient EM otherwise.
+    /// The fitted model is written as a model file.
+    #[arg(long, conflicts_with = "kind")]
+    pub model: Option<PathBuf>,
     #[command(flatten)]
     pub data: DataArgs,
     /// Model order (required with `--init n4sid`; checked against a model file), or
@@ -259,7 +267,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         std::iter::once(o.out.as_path()).chain(o.trace.as_deref()),
         o.force,
     )?;
-    match o.kind.to_ascii_lowercase().as_str() {
+    let Some(kind) = &o.kind else {
+        return super::fit_model::run(o);
+    };
+    match kind.to_ascii_lowercase().as_str() {
         "lti" => {}
         "nlbench" => return super::fit_affine::run(o, true),
         "wiener" => return super::fit_wiener::run(o),
@@ -277,8 +288,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             return Err(CliError::BadOption {
                 option: "fit",
                 message: format!(
-                    "unknown model class {:?} (known: lti, nlbench, affine, wiener)",
-                    o.kind
+                    "unknown model class {kind:?} (known: lti, nlbench, affine, wiener; or \
+                     give a model file with --model)"
                 ),
             });
         }

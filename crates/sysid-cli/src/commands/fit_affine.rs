@@ -23,6 +23,7 @@ use sysid::em::affine::{
 use sysid::em::linear::Covariance;
 use sysid::em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
 use sysid::kalman::ModelSpec;
+use sysid::modelfile::ExprAffine;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
 use sysid::smc::{
     AdditiveFunctional, FfbsiReject, History, Series, SmcError, Smoother, SmootherStats, Tanizaki,
@@ -179,6 +180,34 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
     }
 }
 
+/// `sysid fit --model m.toml` for a model affine in its free parameters: closed-form
+/// particle EM (`--method robust`, `em` or `psaem`); which noise variances are
+/// estimated is the file's choice.
+pub fn run_file(o: &Options, affine: &ExprAffine, file: DataFile) -> Result<(), CliError> {
+    if o.particles == 0 {
+        return Err(bad("--particles", "must be at least 1"));
+    }
+    if o.estimate_noise.is_some() {
+        return Err(bad(
+            "--estimate-noise",
+            "a model file says which noise variances are estimated (a parameter with \
+             fixed = true is held)",
+        ));
+    }
+    let options = EmOptions {
+        max_iterations: o.max_iter,
+        tol: 0.0,
+        ..EmOptions::default()
+    }
+    .check()
+    .map_err(|e| bad("--max-iter", e.to_string()))?;
+    let start = affine
+        .params(&affine.file().free_values())
+        .map_err(|m| bad("--model", m))?;
+    let job = Job { o, file, options };
+    fit_with(&job, affine, start, affine.em_spec(), |p| affine.theta(p))
+}
+
 fn fit_with<A, F>(
     job: &Job,
     model: &A,
@@ -276,6 +305,50 @@ impl<M: TransitionBound + Sync> Smoother<M> for ChosenSmoother {
 trait ParamNames {
     fn names(&self, params: &AffineParams) -> Vec<String>;
     fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError>;
+
+    /// The output file's text: the model, with `summary` (how it was fitted) where the
+    /// format has room for it.
+    fn model_text(
+        &self,
+        params: &AffineParams,
+        summary: &serde_json::Value,
+    ) -> Result<String, CliError> {
+        let mut json = self.model_json(params)?;
+        // A linear model file stays a plain model file (readable by every command);
+        // the nlbench result records how it was obtained.
+        if json.get("system").is_some() {
+            json["particle_em"] = summary.clone();
+        }
+        Ok(serde_json::to_string_pretty(&json).expect("serialises") + "\n")
+    }
+}
+
+impl ParamNames for ExprAffine {
+    fn names(&self, _: &AffineParams) -> Vec<String> {
+        self.file().free_names()
+    }
+
+    fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError> {
+        Ok(self
+            .file()
+            .free_names()
+            .into_iter()
+            .zip(self.theta(params))
+            .map(|(n, v)| (n, serde_json::json!(v)))
+            .collect::<serde_json::Map<_, _>>()
+            .into())
+    }
+
+    /// The model file with the estimates as its values; the fit's scalar facts go to
+    /// its `[metadata]`.
+    fn model_text(
+        &self,
+        params: &AffineParams,
+        summary: &serde_json::Value,
+    ) -> Result<String, CliError> {
+        let fitted = self.file().with_values(&self.theta(params));
+        Ok(fitted.to_toml(&super::fit_model::metadata_lines(summary)))
+    }
 }
 
 impl ParamNames for NlbenchAffine {
@@ -373,18 +446,13 @@ where
             "{context}, EM iteration {iteration}"
         ))(error.clone()));
     }
-    let mut json = model.model_json(&result.estimate)?;
-    // A linear model file stays a plain model file (readable by every command); the
-    // nlbench result records how it was obtained.
-    if json.get("system").is_some() {
-        json["particle_em"] = serde_json::json!({
+    let summary = serde_json::json!({
         "iterations": result.iterations, "particles": o.particles, "method": method,
         "seed": o.seed, "loglik_estimate": result.loglik,
         "likelihood_decreases": result.decreases,
-        });
-    }
-    let text = serde_json::to_string_pretty(&json).expect("serialises");
-    write_output(&o.out, o.force, &(text + "\n"))?;
+    });
+    let text = model.model_text(&result.estimate, &summary)?;
+    write_output(&o.out, o.force, &text)?;
     if let Some(path) = &o.trace {
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
         for (k, values) in trace.rows.iter().enumerate() {
@@ -486,14 +554,7 @@ where
             "settled": settled, "largest_change_last_quarters": change},
         "warnings": fit.warnings,
     });
-    let mut json = model.model_json(&fit.estimate)?;
-    if json.get("system").is_some() {
-        json["particle_em"] = summary.clone();
-    }
-    let mut outputs = vec![(
-        o.out.clone(),
-        serde_json::to_string_pretty(&json).expect("serialises") + "\n",
-    )];
+    let mut outputs = vec![(o.out.clone(), model.model_text(&fit.estimate, &summary)?)];
     if let Some(path) = &o.trace {
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
         for (k, (p, l)) in fit.refine_trace.iter().zip(&fit.refine_loglik).enumerate() {

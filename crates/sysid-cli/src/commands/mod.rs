@@ -6,11 +6,13 @@ pub mod detrend;
 mod filter_trust;
 pub mod fit;
 pub mod fit_affine;
+pub mod fit_model;
 pub mod fit_wiener;
 pub mod fix;
 pub mod forecast;
 pub mod loglik;
 pub mod n4sid;
+pub mod nonlinear;
 pub mod particle;
 pub mod plot;
 pub mod pmcmc;
@@ -61,6 +63,33 @@ impl DataArgs {
             )?;
             trend.remove(&mut file);
         }
+        Ok(file)
+    }
+
+    /// Reads the data file for a nonlinear model file: the columns named as the
+    /// model's inputs and outputs when the file has them (and none are chosen), else
+    /// the default columns (u1, u2, ... and y1, y2, ...); their counts are checked
+    /// against the model's.
+    pub fn read_for_names(
+        &self,
+        inputs: &[String],
+        outputs: &[String],
+    ) -> Result<DataFile, CliError> {
+        let file = if self.inputs.is_none() && self.outputs.is_none() {
+            let names = Metadata {
+                inputs: inputs.to_vec(),
+                outputs: outputs.to_vec(),
+                ..Metadata::default()
+            };
+            match self.read_columns(Some(&names), false) {
+                Ok(file) => file,
+                // a record with the default column names (y1, u1, ...)
+                Err(_) => self.read()?,
+            }
+        } else {
+            self.read()?
+        };
+        check_column_counts(&file, inputs.len(), outputs.len())?;
         Ok(file)
     }
 

@@ -1,12 +1,14 @@
 //! `sysid pf` and `sysid psmooth`: the particle filter and the particle smoothers on a
-//! canonical nonlinear system (`nlbench`), a canonical linear one (`lgss`) or a linear
-//! Gaussian model file (through the SMC adapter, for comparison with `smooth`).
+//! nonlinear model file (`--model m.toml`), a built-in system (`--system nlbench`,
+//! `lgss`, `pendulum`) or a linear Gaussian model file (JSON, through the SMC adapter,
+//! for comparison with `smooth`).
 
 use crate::DataArgs;
 use crate::error::CliError;
 use crate::files::{DataFile, create_output, fmt, read_model};
 use std::io::Write;
 use std::path::PathBuf;
+use sysid::modelfile::ExprSmc;
 use sysid::models::{LinearGaussianSmc, Nlbench, lgss};
 use sysid::smc::{
     Ffbsi, FfbsiReject, FilterModel, FilterOptions, Genealogy, ParticleFilter, Resampling, Series,
@@ -16,10 +18,11 @@ use sysid::smc::{
 /// The model and the filter settings shared by `pf` and `psmooth`.
 #[derive(clap::Args, Debug)]
 pub struct ParticleArgs {
-    /// Canonical system: nlbench or lgss (or give --model).
+    /// Built-in system: nlbench, lgss or pendulum (or give --model).
     #[arg(long, conflicts_with = "model", required_unless_present = "model")]
     pub system: Option<String>,
-    /// Linear Gaussian model file (JSON; needs S = 0 and positive definite Q and R).
+    /// Model file: a nonlinear model (`.toml`, docs/model-format.md) or a linear
+    /// Gaussian one (JSON; needs S = 0 and positive definite Q and R).
     #[arg(long)]
     pub model: Option<PathBuf>,
     #[command(flatten)]
@@ -146,6 +149,14 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
 enum ChosenModel {
     Nlbench(Nlbench),
     Linear(Box<LinearGaussianSmc>),
+    File(Box<ExprSmc>),
+}
+
+/// The data columns a model reads: by count (the defaults u1.., y1..) or by the names
+/// of a model file (when the data have them).
+enum Columns<'a> {
+    Counts { outputs: usize, inputs: usize },
+    Names(&'a ExprSmc),
 }
 
 fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
@@ -161,10 +172,10 @@ fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
             &lgss(),
             "lgss".into(),
         )?))),
-        (Some(name), _) => Err(CliError::UnknownSystem {
-            name: name.clone(),
-            known: "nlbench, lgss".into(),
-        }),
+        (Some(name), _) => file_model(super::nonlinear::system(name)?),
+        (None, Some(path)) if super::nonlinear::is_model_file(path) => {
+            file_model(super::nonlinear::read(path)?)
+        }
         (None, Some(path)) => {
             let model = read_model(path)?;
             Ok(ChosenModel::Linear(Box::new(adapt(
@@ -179,10 +190,28 @@ fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
     }
 }
 
-fn read_series(a: &ParticleArgs, outputs: usize, inputs: usize) -> Result<DataFile, CliError> {
-    let file = a.data.read()?;
-    super::check_column_counts(&file, inputs, outputs)?;
-    Ok(file)
+/// The model file at its parameters' values.
+fn file_model(file: sysid::modelfile::ModelFile) -> Result<ChosenModel, CliError> {
+    let smc = file
+        .at(&file.free_values())
+        .map_err(|message| CliError::BadOption {
+            option: "--model",
+            message: format!("{}: {message}", file.origin()),
+        })?;
+    Ok(ChosenModel::File(Box::new(smc)))
+}
+
+fn read_series(a: &ParticleArgs, columns: Columns) -> Result<DataFile, CliError> {
+    match columns {
+        Columns::Counts { outputs, inputs } => {
+            let file = a.data.read()?;
+            super::check_column_counts(&file, inputs, outputs)?;
+            Ok(file)
+        }
+        Columns::Names(model) => a
+            .data
+            .read_for_names(&model.spec().inputs, &model.spec().outputs),
+    }
 }
 
 /// Writes `t, x1.., [x1_sd..]` rows.
@@ -220,22 +249,29 @@ fn write_states(
 pub fn run_filter(a: &ParticleArgs) -> Result<(), CliError> {
     crate::files::refuse_existing(a.out.as_deref(), a.force)?;
     match choose_model(a)? {
-        ChosenModel::Nlbench(m) => filter_with(a, &m, 1, 0),
+        ChosenModel::Nlbench(m) => filter_with(
+            a,
+            &m,
+            Columns::Counts {
+                outputs: 1,
+                inputs: 0,
+            },
+        ),
         ChosenModel::Linear(m) => {
-            let (p, inputs) = (m.output_dim(), m.input_dim());
-            filter_with(a, m.as_ref(), p, inputs)
+            let (outputs, inputs) = (m.output_dim(), m.input_dim());
+            filter_with(a, m.as_ref(), Columns::Counts { outputs, inputs })
         }
+        ChosenModel::File(m) => filter_with(a, m.as_ref(), Columns::Names(m.as_ref())),
     }
 }
 
 fn filter_with<M: FilterModel + Sync>(
     a: &ParticleArgs,
     model: &M,
-    outputs: usize,
-    inputs: usize,
+    columns: Columns,
 ) -> Result<(), CliError> {
     let options = filter_options(a, false)?;
-    let file = read_series(a, outputs, inputs)?;
+    let file = read_series(a, columns)?;
     // particles and their copy, weights, log-weights and ancestors; the filtered
     // means of every step
     let n = model.state_dim() as f64;
@@ -297,24 +333,31 @@ pub(crate) fn series_of<'a>(file: &'a DataFile, context: &str) -> Result<Series<
 pub fn run_smoother(a: &SmoothArgs) -> Result<(), CliError> {
     crate::files::refuse_existing(a.common.out.as_deref(), a.common.force)?;
     match choose_model(&a.common)? {
-        ChosenModel::Nlbench(m) => smooth_with(a, &m, 1, 0),
+        ChosenModel::Nlbench(m) => smooth_with(
+            a,
+            &m,
+            Columns::Counts {
+                outputs: 1,
+                inputs: 0,
+            },
+        ),
         ChosenModel::Linear(m) => {
-            let (p, inputs) = (m.output_dim(), m.input_dim());
-            smooth_with(a, m.as_ref(), p, inputs)
+            let (outputs, inputs) = (m.output_dim(), m.input_dim());
+            smooth_with(a, m.as_ref(), Columns::Counts { outputs, inputs })
         }
+        ChosenModel::File(m) => smooth_with(a, m.as_ref(), Columns::Names(m.as_ref())),
     }
 }
 
 fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     a: &SmoothArgs,
     model: &M,
-    outputs: usize,
-    inputs: usize,
+    columns: Columns,
 ) -> Result<(), CliError> {
     let c = &a.common;
     let path_count = paths_of(&a.method, a.paths, c.particles)?;
     let options = filter_options(c, true)?;
-    let file = read_series(c, outputs, inputs)?;
+    let file = read_series(c, columns)?;
     // the filter's history (states, weights, ancestors at every step) and the paths
     let (n, steps) = (model.state_dim() as f64, file.record.len() as f64);
     let history = c.particles as f64 * steps * (n + 2.0);

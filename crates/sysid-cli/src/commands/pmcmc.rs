@@ -1,5 +1,7 @@
-//! `sysid pmmh` and `sysid pgas`: Bayesian identification of a canonical system's
-//! parameters (`lgss`: phi, q, r; `nlbench`: a, b, c, d [, q, r]) from a data file.
+//! `sysid pmmh` and `sysid pgas`: Bayesian identification of the free parameters of a
+//! nonlinear model file (`--model m.toml`, priors from the file), or of a canonical
+//! system's (`lgss`: phi, q, r; `nlbench`: a, b, c, d [, q, r]; other built-in names are
+//! model files) from a data file.
 //!
 //! Default priors (override any of them with `--prior FILE`, a JSON object from
 //! parameter name to a prior such as `{"q": {"family": "inverse_gamma", "shape": 2,
@@ -25,10 +27,15 @@ use sysid::smc::Resampling;
 /// Options shared by `pmmh` and `pgas`.
 #[derive(clap::Args, Debug)]
 pub struct ChainArgs {
-    /// Canonical system: lgss (phi, q, r) or nlbench (a, b, c, d; with
-    /// --estimate-noise also q, r).
+    /// Canonical system: lgss (phi, q, r), nlbench (a, b, c, d; with
+    /// --estimate-noise also q, r), or another built-in model file (pendulum).
+    #[arg(long, required_unless_present = "model", conflicts_with = "model")]
+    pub system: Option<String>,
+    /// A nonlinear model file (`.toml`): its free parameters are sampled, from their
+    /// values in the file (a file written by `sysid fit` starts at the estimate), under
+    /// the priors the file gives (`--prior` overrides them).
     #[arg(long)]
-    pub system: String,
+    pub model: Option<PathBuf>,
     #[command(flatten)]
     pub data: DataArgs,
     /// Iterations per chain, burn-in included.
@@ -48,7 +55,7 @@ pub struct ChainArgs {
     #[arg(long)]
     pub prior: Option<PathBuf>,
     /// Starting parameters, comma separated, in the system's order (default: the
-    /// canonical system's values; lgss starts at 0.5, 1, 1).
+    /// canonical system's values, lgss starts at 0.5, 1, 1; a model file's values).
     #[arg(long, value_delimiter = ',')]
     pub start: Option<Vec<f64>>,
     /// nlbench: also sample the noise variances q and r.
@@ -67,6 +74,28 @@ pub struct ChainArgs {
     /// Print the summary as one JSON line.
     #[arg(long)]
     pub json: bool,
+}
+
+impl ChainArgs {
+    /// The system's name, or the model file's path.
+    fn label(&self) -> String {
+        match (&self.system, &self.model) {
+            (Some(name), _) => name.clone(),
+            (None, Some(path)) => path.display().to_string(),
+            (None, None) => String::new(),
+        }
+    }
+
+    /// The model file the chains run on: `--model`, or a built-in name other than the
+    /// tuned lgss and nlbench families.
+    fn model_file(&self) -> Result<Option<sysid::modelfile::ModelFile>, CliError> {
+        match (&self.system, &self.model) {
+            (_, Some(path)) => Ok(Some(super::nonlinear::read(path)?)),
+            (Some(name), None) if name == "lgss" || name == "nlbench" => Ok(None),
+            (Some(name), None) => Ok(Some(super::nonlinear::system(name)?)),
+            (None, None) => Err(bad("--model", "give --model FILE.toml or --system NAME")),
+        }
+    }
 }
 
 /// Options of `sysid pmmh`.
@@ -162,19 +191,25 @@ fn default_priors(system: &str) -> Vec<(&'static str, ScalarPrior)> {
     }
 }
 
-/// The priors of `names`: the defaults, replaced by the entries of the prior file.
+/// The priors of a built-in family's `names`: its defaults, replaced by the entries of
+/// the prior file.
 fn priors(a: &ChainArgs, names: &[String]) -> Result<IndependentPrior, CliError> {
-    let defaults = default_priors(&a.system);
-    let mut chosen: Vec<ScalarPrior> = names
+    let defaults = default_priors(a.system.as_deref().unwrap_or_default());
+    let chosen: Vec<Option<ScalarPrior>> = names
         .iter()
-        .map(|n| {
-            defaults
-                .iter()
-                .find(|(d, _)| d == n)
-                .expect("a default for every name")
-                .1
-        })
+        .map(|n| defaults.iter().find(|(d, _)| d == n).map(|d| d.1))
         .collect();
+    priors_over(a, names, chosen)
+}
+
+/// The priors of `names`: `defaults` (`None`: none given), replaced by the entries of
+/// the prior file; every parameter needs one.
+fn priors_over(
+    a: &ChainArgs,
+    names: &[String],
+    defaults: Vec<Option<ScalarPrior>>,
+) -> Result<IndependentPrior, CliError> {
+    let mut chosen = defaults;
     if let Some(path) = &a.prior {
         let text = std::fs::read_to_string(path).map_err(|source| CliError::Input {
             path: path.clone(),
@@ -189,19 +224,45 @@ fn priors(a: &ChainArgs, names: &[String]) -> Result<IndependentPrior, CliError>
                     format!(
                         "{}: unknown parameter {name:?} (the {} parameters are {})",
                         path.display(),
-                        a.system,
+                        a.label(),
                         names.join(", ")
                     ),
                 )
             })?;
-            chosen[k] = prior;
+            chosen[k] = Some(prior);
         }
     }
+    let chosen = names
+        .iter()
+        .zip(chosen)
+        .map(|(name, prior)| {
+            prior.ok_or_else(|| {
+                bad(
+                    "--prior",
+                    format!(
+                        "{}: the free parameter {name} has no prior: add `prior = {{ family = \
+                         \"normal\", mean = 0.0, sd = 10.0 }}` (or another family, \
+                         docs/model-format.md) to its entry, or give it in a --prior file",
+                        a.label()
+                    ),
+                )
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     IndependentPrior::new(names, chosen).map_err(pmcmc_error(
         &a.prior
             .as_ref()
             .map_or("default prior".into(), |p| p.display().to_string()),
     ))
+}
+
+/// The priors of a model file's free parameters: the file's own, replaced by the
+/// entries of `--prior`.
+fn file_priors(
+    a: &ChainArgs,
+    file: &sysid::modelfile::ModelFile,
+) -> Result<IndependentPrior, CliError> {
+    priors_over(a, &file.free_names(), file.priors())
 }
 
 fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
@@ -241,7 +302,7 @@ fn start_of<F: ModelFamily>(
             format!(
                 "{} values given, {} has {} parameters ({})",
                 start.len(),
-                a.system,
+                a.label(),
                 family.dim(),
                 family.parameter_names().join(", ")
             ),
@@ -265,8 +326,16 @@ fn prepare<F: ModelFamily>(
 ) -> Result<Prepared, CliError> {
     let burn_in = check_common(a)?;
     let start = start_of(a, family, default_start)?;
-    let file = a.data.read()?;
-    super::check_column_counts(&file, 0, 1)?;
+    let file = match a.model_file()? {
+        Some(model) => a
+            .data
+            .read_for_names(&model.spec().inputs, &model.spec().outputs)?,
+        None => {
+            let file = a.data.read()?;
+            super::check_column_counts(&file, 0, 1)?;
+            file
+        }
+    };
     Ok(Prepared {
         burn_in,
         start,
@@ -278,14 +347,30 @@ fn prepare<F: ModelFamily>(
 /// `sysid pmmh`.
 pub fn run_pmmh(a: &PmmhArgs) -> Result<(), CliError> {
     let c = &a.common;
-    match c.system.as_str() {
-        "lgss" => pmmh_with(a, &LgssFamily::default(), vec![0.5, 1.0, 1.0]),
+    if let Some(file) = c.model_file()? {
+        if c.estimate_noise {
+            return Err(bad(
+                "--estimate-noise",
+                "a model file says which parameters are sampled (fixed = true holds one)",
+            ));
+        }
+        let start = file.free_values();
+        let prior = file_priors(c, &file)?;
+        return pmmh_with(a, &file, start, &prior);
+    }
+    match c.system.as_deref().unwrap_or_default() {
+        "lgss" => {
+            let family = LgssFamily::default();
+            let prior = priors(c, &family.parameter_names())?;
+            pmmh_with(a, &family, vec![0.5, 1.0, 1.0], &prior)
+        }
         "nlbench" => {
             let family = NlbenchFamily {
                 estimate_noise: c.estimate_noise,
                 ..NlbenchFamily::default()
             };
-            pmmh_with(a, &family, family.truth())
+            let prior = priors(c, &family.parameter_names())?;
+            pmmh_with(a, &family, family.truth(), &prior)
         }
         other => Err(CliError::UnknownSystem {
             name: other.into(),
@@ -298,9 +383,9 @@ fn pmmh_with<F: ModelFamily>(
     a: &PmmhArgs,
     family: &F,
     default_start: Vec<f64>,
+    prior: &IndependentPrior,
 ) -> Result<(), CliError> {
     let c = &a.common;
-    let prior = priors(c, &family.parameter_names())?;
     let particles = c.particles.unwrap_or(100);
     sample_and_report(
         c,
@@ -318,7 +403,7 @@ fn pmmh_with<F: ModelFamily>(
                 adapt: !a.no_adapt,
             };
             pmmh(
-                family, &prior, series, start, &options, c.chains, c.seed, observer,
+                family, prior, series, start, &options, c.chains, c.seed, observer,
             )
         },
     )
@@ -333,15 +418,33 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
             format!("unknown kernel {:?} (known: as, bs, plain)", a.kernel),
         )
     })?;
-    let step = a.step.clone().unwrap_or_else(|| {
-        if c.system == "lgss" {
-            "conjugate"
-        } else {
-            "mh"
+    if let Some(file) = c.model_file()? {
+        if c.estimate_noise || a.guided {
+            return Err(bad(
+                if a.guided {
+                    "--guided"
+                } else {
+                    "--estimate-noise"
+                },
+                "not for a model file (its fixed = true says which parameters are sampled; \
+                 it has no locally optimal proposal)",
+            ));
         }
-        .to_string()
-    });
-    match (c.system.as_str(), step.as_str()) {
+        if a.step.as_deref().is_some_and(|s| s != "mh") {
+            return Err(bad("--step", "a model file's parameters take the mh step"));
+        }
+        let prior = file_priors(c, &file)?;
+        let step = mh_step(a, &prior, file.dim())?;
+        let start = file.free_values();
+        let run = particle_gibbs::<sysid::modelfile::ModelFile, IndependentPrior, _>;
+        return pgas_with(a, &file, &prior, &step, kernel, start, run);
+    }
+    let system = c.system.clone().unwrap_or_default();
+    let step = a
+        .step
+        .clone()
+        .unwrap_or_else(|| if system == "lgss" { "conjugate" } else { "mh" }.to_string());
+    match (system.as_str(), step.as_str()) {
         ("lgss", "conjugate") => {
             let family = LgssFamily::default();
             let prior = priors(c, &family.parameter_names())?;
@@ -383,10 +486,7 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
         }
         ("lgss" | "nlbench", other) => Err(bad(
             "--step",
-            format!(
-                "{other:?} is not available for {} (known: conjugate for lgss, mh)",
-                c.system
-            ),
+            format!("{other:?} is not available for {system} (known: conjugate for lgss, mh)"),
         )),
         (other, _) => Err(CliError::UnknownSystem {
             name: other.into(),
@@ -513,7 +613,7 @@ fn finish(
     crate::report(
         a.json,
         serde_json::json!({
-            "command": command, "system": a.system, "chains": chains.len(),
+            "command": command, "system": a.label(), "chains": chains.len(),
             "iterations": a.iterations, "burn_in": chains[0].burn_in, "particles": particles,
             "seed": a.seed, "acceptance": acceptance, "summary": summary,
             "min_state_update_rate": min_update_rate, "warnings": warnings,

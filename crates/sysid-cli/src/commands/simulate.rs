@@ -13,8 +13,10 @@ pub struct Options {
     /// response to a record's inputs (--model, --data).
     pub system: Option<String>,
     /// Model file whose response to the inputs of --data is simulated (noise-free unless
-    /// --noise), written with the data's output names.
-    #[arg(long, requires = "data")]
+    /// --noise), written with the data's output names. A nonlinear model file
+    /// (`.toml`) is simulated with its noise for --steps steps (or, with inputs, for the
+    /// rows of --data), its outputs and (--states) states named as in the file.
+    #[arg(long)]
     pub model: Option<PathBuf>,
     /// Record whose inputs drive --model (its outputs, if any, fix the initial state by
     /// least squares and are compared with the simulation).

@@ -9,6 +9,13 @@ use std::io::Write;
 use sysid::kalman::{Record, fit_percent};
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    if let Some(path) = o
+        .model
+        .as_deref()
+        .filter(|p| super::nonlinear::is_model_file(p))
+    {
+        return run_model_file(o, path);
+    }
     let (Some(model_path), Some(data_path)) = (&o.model, &o.data) else {
         return Err(CliError::BadOption {
             option: "simulate",
@@ -154,6 +161,124 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 "wrote the {} response of {} to {}{fit_text}",
                 if o.noise { "noisy" } else { "noise-free" },
                 model_path.display(),
+                o.out.display()
+            )
+        },
+    );
+    Ok(())
+}
+
+/// `sysid simulate --model m.toml [--data inputs.csv]`: one realisation of a nonlinear
+/// model file at its parameters' values, from the random stream `(seed, 0)`.
+fn run_model_file(o: &Options, path: &std::path::Path) -> Result<(), CliError> {
+    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    if o.model_out.is_some() || o.x0.is_some() || o.noise {
+        return Err(CliError::BadOption {
+            option: if o.model_out.is_some() {
+                "--model-out"
+            } else if o.x0.is_some() {
+                "--x0"
+            } else {
+                "--noise"
+            },
+            message: "does not apply to a nonlinear model file (it is simulated with its \
+                      noise, from its initial law)"
+                .into(),
+        });
+    }
+    let file = super::nonlinear::read(path)?;
+    let spec = file.spec();
+    let smc = file
+        .at(&file.free_values())
+        .map_err(|message| CliError::BadOption {
+            option: "--model",
+            message: format!("{}: {message}", path.display()),
+        })?;
+    let (steps, inputs, time) = match &o.data {
+        Some(data_path) => {
+            let data = crate::DataArgs {
+                data: data_path.clone(),
+                inputs: (!spec.inputs.is_empty()).then(|| spec.inputs.clone()),
+                outputs: Some(Vec::new()),
+                range: o.range.clone(),
+                ts: None,
+            };
+            let record = data.read().or_else(|_| {
+                crate::DataArgs {
+                    inputs: None,
+                    ..data.clone()
+                }
+                .read()
+            })?;
+            super::check_column_counts(&record, spec.inputs.len(), 0)?;
+            let u: Vec<f64> = record.record.u.iter().copied().collect();
+            (record.record.len(), u, record.time.clone())
+        }
+        None if !spec.inputs.is_empty() => {
+            return Err(CliError::BadOption {
+                option: "--data",
+                message: format!(
+                    "{} has inputs ({}): give a record of them with --data",
+                    path.display(),
+                    spec.inputs.join(", ")
+                ),
+            });
+        }
+        None => (
+            o.steps,
+            Vec::new(),
+            (1..=o.steps).map(|t| t as f64).collect(),
+        ),
+    };
+    if steps == 0 {
+        return Err(CliError::BadOption {
+            option: "--steps",
+            message: "must be at least 1".into(),
+        });
+    }
+    let (n, p) = (spec.states.len(), spec.outputs.len());
+    crate::resources::check_memory(
+        "--steps",
+        &format!("{steps} steps"),
+        8.0 * steps as f64 * (n + p + spec.inputs.len()) as f64 * 2.0,
+    )?;
+    let (states, outputs) =
+        smc.simulate(steps, &inputs, o.seed)
+            .map_err(|message| CliError::BadOption {
+                option: "--model",
+                message: format!("{}: {message}", path.display()),
+            })?;
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    let mut header = vec!["t".to_string()];
+    header.extend(spec.inputs.iter().cloned());
+    header.extend(spec.outputs.iter().cloned());
+    if o.states {
+        header.extend(spec.states.iter().cloned());
+    }
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    let m = spec.inputs.len();
+    for t in 0..steps {
+        let mut row = vec![fmt(time[t])];
+        row.extend(inputs[t * m..(t + 1) * m].iter().map(|&v| fmt(v)));
+        row.extend(outputs[t * p..(t + 1) * p].iter().map(|&v| fmt(v)));
+        if o.states {
+            row.extend(states[t * n..(t + 1) * n].iter().map(|&v| fmt(v)));
+        }
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.commit()?;
+    crate::report(
+        o.json,
+        serde_json::json!({"command": "simulate", "model": path, "steps": steps,
+            "seed": o.seed, "out": o.out}),
+        || {
+            format!(
+                "wrote {steps} steps of {} to {}",
+                path.display(),
                 o.out.display()
             )
         },

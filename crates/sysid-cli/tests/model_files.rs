@@ -88,7 +88,7 @@ fn a_model_file_goes_through_every_nonlinear_command() {
         s(&trace),
         "--json",
     ]);
-    assert_eq!(report["likelihood_decreases"].as_u64().is_some(), true);
+    assert!(report["likelihood_decreases"].as_u64().is_some());
     let text = std::fs::read_to_string(&fitted).unwrap();
     let back = sysid::modelfile::ModelFile::parse(&text, "fit.toml").unwrap();
     assert_eq!(back.free_names(), ["k", "c"]);

@@ -419,7 +419,9 @@ fn psaem_with_fifteen_particles_reaches_the_nlbench_truth() {
             max_iterations: 2000,
             tol: 0.0,
             ..EmOptions::default()
-        },
+        }
+        .check()
+        .unwrap(),
         &mut (),
     );
     let estimate = NlbenchAffine::nlbench_params(&fit.estimate);

@@ -75,7 +75,9 @@ pub fn run(a: &Args) -> Result<(), String> {
         max_iterations: a.iters,
         tol: 0.0,
         ..EmOptions::default()
-    };
+    }
+    .check()
+    .map_err(|e| e.to_string())?;
     let results: Vec<Result<RunPair, String>> = (0..a.runs)
         .into_par_iter()
         .map(|run| {

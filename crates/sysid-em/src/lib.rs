@@ -14,6 +14,6 @@ mod regression;
 pub mod runner;
 
 pub use runner::{
-    EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError, Termination,
-    relative_change, remaining_gain, run_em,
+    CheckedEmOptions, EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError,
+    Termination, relative_change, remaining_gain, run_em,
 };

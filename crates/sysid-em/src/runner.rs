@@ -119,9 +119,46 @@ pub enum OptionsError {
     },
 }
 
+/// Options that passed [`EmOptions::check`], the only kind [`run_em`] and the fits
+/// take (the guard pattern of linfa's `ParamGuard`): an unchecked value, such as zero
+/// iterations, never reaches an algorithm.
+///
+/// # Example
+/// ```
+/// use sysid_em::{EmOptions, OptionsError};
+/// let checked = EmOptions { max_iterations: 50, ..EmOptions::default() }.check()?;
+/// assert_eq!(checked.max_iterations, 50); // reads through to the options
+/// let refused = EmOptions { max_iterations: 0, ..EmOptions::default() }.check();
+/// assert_eq!(refused, Err(OptionsError::NoIterations));
+/// # Ok::<(), OptionsError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedEmOptions(EmOptions);
+
+impl std::ops::Deref for CheckedEmOptions {
+    type Target = EmOptions;
+    fn deref(&self) -> &EmOptions {
+        &self.0
+    }
+}
+
+impl CheckedEmOptions {
+    /// The options themselves.
+    pub fn into_inner(self) -> EmOptions {
+        self.0
+    }
+}
+
+impl Default for CheckedEmOptions {
+    /// The default options (valid by construction).
+    fn default() -> Self {
+        CheckedEmOptions(EmOptions::default())
+    }
+}
+
 impl EmOptions {
-    /// Validates the options.
-    pub fn check(self) -> Result<EmOptions, OptionsError> {
+    /// Validates the options: at least one iteration, finite non-negative tolerances.
+    pub fn check(self) -> Result<CheckedEmOptions, OptionsError> {
         if self.max_iterations == 0 {
             return Err(OptionsError::NoIterations);
         }
@@ -134,7 +171,7 @@ impl EmOptions {
                 return Err(OptionsError::BadTolerance { name, value });
             }
         }
-        Ok(self)
+        Ok(CheckedEmOptions(self))
     }
 }
 
@@ -152,9 +189,33 @@ pub struct IterationInfo<'a, T> {
 }
 
 /// Watches a run (progress bars, CSV traces, logging). Every method has a default.
+///
+/// # Example
+/// An observer that keeps the log-likelihood of every iteration and notes the start
+/// and the end:
+/// ```
+/// use sysid_em::{EmObserver, IterationInfo};
+/// #[derive(Default)]
+/// struct Log { started: bool, trace: Vec<f64>, finished_after: Option<usize> }
+/// impl<T> EmObserver<T> for Log {
+///     fn start(&mut self, _initial: &T) { self.started = true; }
+///     fn iteration(&mut self, info: &IterationInfo<'_, T>) { self.trace.push(info.loglik); }
+///     fn finish(&mut self, _estimate: &T, _loglik: Option<f64>, iterations: usize) {
+///         self.finished_after = Some(iterations);
+///     }
+/// }
+/// let mut log = Log::default();
+/// EmObserver::<f64>::start(&mut log, &0.5);
+/// assert!(log.started);
+/// ```
 pub trait EmObserver<T> {
+    /// Called once before the first iteration, with the starting estimate.
+    fn start(&mut self, _initial: &T) {}
     /// Called after every iteration.
     fn iteration(&mut self, _info: &IterationInfo<'_, T>) {}
+    /// Called once when the run ends (converged, at the limit, or stopped by an
+    /// error), with the returned estimate, its log-likelihood and the iterations made.
+    fn finish(&mut self, _estimate: &T, _loglik: Option<f64>, _iterations: usize) {}
 }
 
 /// The observer that does nothing.
@@ -162,16 +223,30 @@ impl<T> EmObserver<T> for () {}
 
 /// An observer lent to a run.
 impl<T, O: EmObserver<T> + ?Sized> EmObserver<T> for &mut O {
+    fn start(&mut self, initial: &T) {
+        (**self).start(initial);
+    }
     fn iteration(&mut self, info: &IterationInfo<'_, T>) {
         (**self).iteration(info);
+    }
+    fn finish(&mut self, estimate: &T, loglik: Option<f64>, iterations: usize) {
+        (**self).finish(estimate, loglik, iterations);
     }
 }
 
 /// Two observers, called in order (e.g. a trace and a progress bar).
 impl<T, A: EmObserver<T>, B: EmObserver<T>> EmObserver<T> for (A, B) {
+    fn start(&mut self, initial: &T) {
+        self.0.start(initial);
+        self.1.start(initial);
+    }
     fn iteration(&mut self, info: &IterationInfo<'_, T>) {
         self.0.iteration(info);
         self.1.iteration(info);
+    }
+    fn finish(&mut self, estimate: &T, loglik: Option<f64>, iterations: usize) {
+        self.0.finish(estimate, loglik, iterations);
+        self.1.finish(estimate, loglik, iterations);
     }
 }
 
@@ -245,7 +320,20 @@ pub fn remaining_gain(l0: f64, l1: f64, l2: f64) -> f64 {
 pub fn run_em<A: EmAlgorithm>(
     algorithm: &mut A,
     initial: A::Estimate,
-    options: &EmOptions,
+    options: &CheckedEmOptions,
+    observer: &mut impl EmObserver<A::Estimate>,
+) -> EmResult<A::Estimate, A::Error> {
+    observer.start(&initial);
+    let result = iterate(algorithm, initial, options, observer);
+    observer.finish(&result.estimate, result.loglik, result.iterations);
+    result
+}
+
+/// The iterations of [`run_em`] (between the observer's start and finish).
+fn iterate<A: EmAlgorithm>(
+    algorithm: &mut A,
+    initial: A::Estimate,
+    options: &CheckedEmOptions,
     observer: &mut impl EmObserver<A::Estimate>,
 ) -> EmResult<A::Estimate, A::Error> {
     let start = Instant::now();

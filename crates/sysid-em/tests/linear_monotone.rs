@@ -222,7 +222,13 @@ fn a_start_outside_the_spec_is_refused() {
         q: Covariance::Diagonal,
         ..spec
     };
-    let result = fit(full_q, &records, spec, &EmOptions::default(), &mut ());
+    let result = fit(
+        full_q,
+        &records,
+        spec,
+        &sysid_em::CheckedEmOptions::default(),
+        &mut (),
+    );
     assert!(matches!(
         result.termination,
         Termination::Error {

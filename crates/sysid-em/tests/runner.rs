@@ -1,6 +1,8 @@
 //! The runner's termination paths, on toy algorithms with known behaviour.
 
-use sysid_em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
+use sysid_em::{
+    CheckedEmOptions, EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em,
+};
 
 /// Estimates are integers k; the log-likelihood of k is `lik[k]`; a step goes k -> k+1.
 /// `fail_at` makes the step from that estimate fail.
@@ -30,7 +32,7 @@ impl EmAlgorithm for Scripted {
     }
 }
 
-fn options(max_iterations: usize, tol: f64) -> EmOptions {
+fn options(max_iterations: usize, tol: f64) -> CheckedEmOptions {
     EmOptions {
         max_iterations,
         tol,
@@ -181,4 +183,41 @@ fn observers_see_every_iteration_and_options_are_validated() {
         .check()
         .is_err()
     );
+}
+
+/// The observer hears the start once, every iteration, and the end once with the
+/// returned estimate.
+#[test]
+fn observers_hear_the_start_and_the_finish() {
+    #[derive(Default)]
+    struct Events(Vec<String>);
+    impl EmObserver<usize> for Events {
+        fn start(&mut self, initial: &usize) {
+            self.0.push(format!("start {initial}"));
+        }
+        fn iteration(&mut self, info: &IterationInfo<'_, usize>) {
+            self.0.push(format!("iteration {}", info.iteration));
+        }
+        fn finish(&mut self, estimate: &usize, loglik: Option<f64>, iterations: usize) {
+            self.0
+                .push(format!("finish {estimate} {loglik:?} {iterations}"));
+        }
+    }
+    let mut alg = Scripted {
+        lik: vec![-4.0, -3.0, -2.0, -1.0],
+        fail_at: None,
+        exact: true,
+    };
+    let mut events = Events::default();
+    let r = run_em(&mut alg, 0, &options(2, 0.0), &mut events);
+    assert_eq!(
+        events.0,
+        [
+            "start 0",
+            "iteration 1",
+            "iteration 2",
+            "finish 2 Some(-2.0) 2"
+        ]
+    );
+    assert_eq!((r.estimate, r.iterations), (2, 2));
 }

@@ -87,7 +87,9 @@ fn gradient_em_and_pmmh_recover_a_non_affine_model() {
         max_iterations: 40,
         tol: 0.0,
         ..EmOptions::default()
-    };
+    }
+    .check()
+    .unwrap();
     let began = std::time::Instant::now();
     let run = run_em(&mut em, gradient.unconstrained(&start), &options, &mut ());
     assert!(

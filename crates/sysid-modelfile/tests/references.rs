@@ -159,7 +159,9 @@ fn particle_em_on_a_linear_model_file_reaches_exact_em() {
         max_iterations: 20_000,
         tol: 1e-12,
         ..EmOptions::default()
-    };
+    }
+    .check()
+    .unwrap();
     let exact = fit(start, &[record], spec, &options, &mut ()).estimate;
     let exact = [exact.a()[(0, 0)], exact.q()[(0, 0)], exact.r()[(0, 0)]];
 
@@ -190,7 +192,9 @@ fn particle_em_on_a_linear_model_file_reaches_exact_em() {
             max_iterations: 80,
             tol: 0.0,
             ..EmOptions::default()
-        },
+        }
+        .check()
+        .unwrap(),
         &mut observer,
     );
     assert!(!matches!(

@@ -525,8 +525,13 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
     let options = if polish_on {
         EmOptions {
             distance_tol: options.distance_tol.max(POLISH_SWITCH_NATS),
-            ..options
+            ..options.into_inner()
         }
+        .check()
+        .map_err(|e| CliError::BadOption {
+            option: "--tol-nats",
+            message: e.to_string(),
+        })?
     } else {
         options
     };
@@ -560,8 +565,13 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
         "squarem" => {
             let cycles = EmOptions {
                 max_iterations: o.max_iter.div_ceil(3).max(1),
-                ..options.clone()
-            };
+                ..options.clone().into_inner()
+            }
+            .check()
+            .map_err(|e| CliError::BadOption {
+                option: "--max-iter",
+                message: e.to_string(),
+            })?;
             let accelerated = fit_squarem(start, records, spec.clone(), &cycles, &mut progress);
             (accelerated.run, accelerated.e_steps)
         }

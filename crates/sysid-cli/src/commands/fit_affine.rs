@@ -124,7 +124,7 @@ impl<F: Fn(&AffineParams) -> Vec<f64>> EmObserver<AffineParams> for ParamTrace<F
 struct Job<'a> {
     o: &'a Options,
     file: DataFile,
-    options: EmOptions,
+    options: sysid::em::CheckedEmOptions,
 }
 
 /// `sysid fit nlbench` / `sysid fit affine`.

@@ -81,7 +81,12 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         max_iterations: o.max_iter,
         tol: 0.0,
         ..EmOptions::default()
-    };
+    }
+    .check()
+    .map_err(|e| CliError::BadOption {
+        option: "--max-iter",
+        message: e.to_string(),
+    })?;
     let mut trace = Trace {
         model: &model,
         rows: Vec::new(),

@@ -38,7 +38,7 @@ pub use uncertainty::{ParameterEstimate, Uncertainty, UncertaintyError, standard
 
 pub use spec::{Covariance, FixedEntries, LinearEmSpec, floor_output_noise, floor_variances};
 
-use crate::{EmAlgorithm, EmObserver, EmOptions, EmResult, run_em};
+use crate::{CheckedEmOptions, EmAlgorithm, EmObserver, EmResult, run_em};
 use sysid_kalman::{
     KalmanError, KalmanWorkspace, LinearGaussianModel, Record, SufficientStatistics,
 };
@@ -152,14 +152,15 @@ impl EmAlgorithm for LinearEm<'_> {
 /// let data = truth.simulate(&DMatrix::zeros(0, 500), &mut Xoshiro256PlusPlus::seed_from_u64(3)).unwrap();
 /// let start = truth.to_builder().a(nalgebra::dmatrix![0.5]).q(nalgebra::dmatrix![0.3]).build().unwrap();
 /// let spec = LinearEmSpec { c: false, mu: false, p1: false, ..LinearEmSpec::default() };
-/// let result = fit(start, &[data.record], spec, &EmOptions::default(), &mut ());
+/// let options = EmOptions::default().check().unwrap();
+/// let result = fit(start, &[data.record], spec, &options, &mut ());
 /// assert!((result.estimate.a()[(0, 0)] - 0.9).abs() < 0.1);
 /// ```
 pub fn fit(
     initial: LinearGaussianModel,
     records: &[Record],
     spec: LinearEmSpec,
-    options: &EmOptions,
+    options: &CheckedEmOptions,
     observer: &mut impl EmObserver<LinearGaussianModel>,
 ) -> EmResult<LinearGaussianModel, LinearEmError> {
     if let Some(refused) = refuse(&initial, records, &spec) {
@@ -227,7 +228,9 @@ pub struct SquaremResult {
 /// let data = truth.simulate(&DMatrix::zeros(0, 500), &mut Xoshiro256PlusPlus::seed_from_u64(3)).unwrap();
 /// let start = truth.to_builder().q(dmatrix![0.5]).build().unwrap();
 /// let spec = LinearEmSpec { c: false, mu: false, p1: false, ..LinearEmSpec::default() };
-/// let options = EmOptions { max_iterations: 5000, tol: 1e-10, ..EmOptions::default() };
+/// let options = EmOptions { max_iterations: 5000, tol: 1e-10, ..EmOptions::default() }
+///     .check()
+///     .unwrap();
 /// let records = [data.record];
 /// let plain = fit(start.clone(), &records, spec.clone(), &options, &mut ());
 /// let fast = fit_squarem(start, &records, spec, &options, &mut ());
@@ -238,7 +241,7 @@ pub fn fit_squarem(
     initial: LinearGaussianModel,
     records: &[Record],
     spec: LinearEmSpec,
-    options: &EmOptions,
+    options: &CheckedEmOptions,
     observer: &mut impl EmObserver<LinearGaussianModel>,
 ) -> SquaremResult {
     if let Some(run) = refuse(&initial, records, &spec) {

@@ -50,3 +50,9 @@ pub mod prelude {
         FilterOptions, ParticleFilter, Resampling, Series, SmcError, Smoother, Trajectories,
     };
 }
+
+/// The Rust code blocks of `docs/guide.md`, compiled and run by `cargo test` as
+/// doctests (its shell commands run in `crates/sysid-cli/tests/documented.rs`).
+#[cfg(doctest)]
+#[doc = include_str!("../docs/guide.md")]
+pub struct GuideDoctests;

@@ -46,11 +46,15 @@ fn run_all(lines: &[String]) -> PathBuf {
 fn run_checked(lines: &[String], no_warnings: bool) -> PathBuf {
     let dir = scratch_dir();
     let data = root().join("crates/sysid-cli/tests/data/");
+    let models = root().join("examples/models/");
     for line in lines {
         let args: Vec<String> = line
             .split_whitespace()
             .skip(1)
-            .map(|a| a.replace("crates/sysid-cli/tests/data/", data.to_str().unwrap()))
+            .map(|a| {
+                a.replace("crates/sysid-cli/tests/data/", data.to_str().unwrap())
+                    .replace("examples/models/", models.to_str().unwrap())
+            })
             .collect();
         let out = Command::new(env!("CARGO_BIN_EXE_sysid"))
             .args(&args)

@@ -17,6 +17,36 @@
 use std::time::{Duration, Instant};
 
 /// One EM variant: the E-step and the M-step.
+///
+/// # Example
+/// EM for the mean of `N(mu, 1)` data with half of the values missing at random has a
+/// one-line E- and M-step; the runner does the rest:
+/// ```
+/// use sysid_em::{EmAlgorithm, EmOptions, run_em};
+/// struct MeanEm { observed: Vec<f64>, missing: usize }
+/// impl MeanEm {
+///     fn loglik_of(&self, mu: f64) -> f64 {
+///         self.observed.iter().map(|y| -0.5 * (y - mu).powi(2)).sum()
+///     }
+/// }
+/// impl EmAlgorithm for MeanEm {
+///     type Estimate = f64;
+///     type Error = std::convert::Infallible;
+///     fn step(&mut self, mu: &f64) -> Result<(f64, f64), Self::Error> {
+///         // E: each missing value is expected at mu; M: the mean of the completed data
+///         let total = self.observed.iter().sum::<f64>() + self.missing as f64 * mu;
+///         let next = total / (self.observed.len() + self.missing) as f64;
+///         Ok((next, self.loglik_of(*mu)))
+///     }
+///     fn loglik(&mut self, mu: &f64) -> Result<f64, Self::Error> {
+///         Ok(self.loglik_of(*mu))
+///     }
+/// }
+/// let mut em = MeanEm { observed: vec![1.0, 2.0, 3.0], missing: 3 };
+/// let options = EmOptions { tol: 1e-12, ..EmOptions::default() }.check().unwrap();
+/// let result = run_em(&mut em, 0.0, &options, &mut ());
+/// assert!((result.estimate - 2.0).abs() < 1e-5);
+/// ```
 pub trait EmAlgorithm {
     /// The parameter estimate.
     type Estimate: Clone;

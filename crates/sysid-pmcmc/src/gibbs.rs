@@ -44,6 +44,76 @@ use crate::{Chain, ChainObserver, ModelFamily, PmcmcError, Prior};
 /// A Markov kernel for `theta` given the states, leaving `p(theta | x, y)` invariant.
 ///
 /// Each chain works on its own clone.
+///
+/// # Example
+/// A random-walk Metropolis step on `phi` of the AR(1) family, whose conditional
+/// density given the states is the product of the transition densities (flat prior):
+/// ```
+/// # use rand_distr::{Distribution, StandardNormal};
+/// # use sysid_smc::*;
+/// # /// x' = phi x + w (w ~ N(0, q)), y = x + e (e ~ N(0, 0.5)), x_0 ~ N(0, 1)
+/// # #[derive(Clone)]
+/// # struct Ar { phi: f64, q: f64 }
+/// # impl StateSpace for Ar { fn state_dim(&self) -> usize { 1 } }
+/// # impl InitialSampler for Ar {
+/// #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+/// #         x[0] = StandardNormal.sample(rng);
+/// #     }
+/// # }
+/// # impl TransitionSampler for Ar {
+/// #     fn sample_transition<R: rand::Rng + ?Sized>(
+/// #         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+/// #     ) {
+/// #         let w: f64 = StandardNormal.sample(rng);
+/// #         next[0] = self.phi * x[0] + self.q.sqrt() * w;
+/// #     }
+/// # }
+/// # impl ObservationDensity for Ar {
+/// #     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(0.5).log_density(x[0], y[0])
+/// #     }
+/// # }
+/// # impl TransitionDensity for Ar {
+/// #     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(self.q).log_density(self.phi * x[0], next[0])
+/// #     }
+/// # }
+/// use rand::RngExt;
+/// use sysid_pmcmc::{ModelFamily, ParameterStep, Support};
+/// # struct ArFamily;
+/// # impl ModelFamily for ArFamily {
+/// #     type Model = Ar;
+/// #     fn parameter_names(&self) -> Vec<String> { vec!["phi".into()] }
+/// #     fn supports(&self) -> Vec<Support> { vec![Support::Interval(-1.0, 1.0)] }
+/// #     fn model(&self, theta: &[f64]) -> Result<Ar, String> { Ok(Ar { phi: theta[0], q: 1.0 }) }
+/// # }
+/// #[derive(Clone)]
+/// struct PhiStep { sd: f64 }
+/// impl ParameterStep<ArFamily> for PhiStep {
+///     fn update(&mut self, family: &ArFamily, theta: &mut [f64], x: &[f64], _data: &Series,
+///         rng: &mut sysid_smc::Rng) -> Result<bool, String> {
+///         let log_p = |phi: f64| -> f64 {
+///             let model = Ar { phi, q: 1.0 };
+///             x.windows(2).map(|w| model.log_transition(0, &w[..1], &[], &w[1..])).sum()
+///         };
+///         let proposal = theta[0] + self.sd * (rng.random::<f64>() - 0.5);
+///         if proposal.abs() >= 1.0 {
+///             return Ok(false);
+///         }
+///         let accept = rng.random::<f64>().ln() < log_p(proposal) - log_p(theta[0]);
+///         if accept {
+///             theta[0] = proposal;
+///         }
+///         Ok(accept)
+///     }
+/// }
+/// let mut theta = [0.5];
+/// let states = [0.0, 0.9, 1.5, 1.2];
+/// let y = [0.0; 4];
+/// let mut step = PhiStep { sd: 0.2 };
+/// step.update(&ArFamily, &mut theta, &states, &Series::new(&y, 1).unwrap(), &mut stream(1, 0)).unwrap();
+/// assert!(theta[0].abs() < 1.0);
+/// ```
 pub trait ParameterStep<F: ModelFamily>: Clone + Send + Sync {
     /// Updates `theta` given the trajectory `x` (time-major `T x n`); returns whether a
     /// proposal was accepted (always true for an exact draw), or why the step failed.

@@ -24,6 +24,24 @@ use statrs::distribution::{Beta, Continuous, Gamma, InverseGamma, LogNormal, Nor
 use crate::{PmcmcError, Support};
 
 /// A prior on the whole parameter vector.
+///
+/// # Example
+/// A prior that makes two parameters exchangeable (`theta_0, theta_1` iid `N(0, 1)`)
+/// and requires `theta_0 < theta_1` (an ordered pair):
+/// ```
+/// use sysid_pmcmc::Prior;
+/// struct Ordered;
+/// impl Prior for Ordered {
+///     fn log_density(&self, theta: &[f64]) -> f64 {
+///         if theta[0] < theta[1] {
+///             -0.5 * (theta[0] * theta[0] + theta[1] * theta[1])
+///         } else {
+///             f64::NEG_INFINITY
+///         }
+///     }
+/// }
+/// assert_eq!(Ordered.log_density(&[1.0, 0.0]), f64::NEG_INFINITY);
+/// ```
 pub trait Prior: Sync {
     /// `log p(theta)`; `-inf` outside the support.
     fn log_density(&self, theta: &[f64]) -> f64;

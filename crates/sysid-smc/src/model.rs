@@ -16,12 +16,40 @@
 //! A missing capability is a compile-time error, not a run-time one.
 
 /// The state dimension, shared by every capability.
+/// # Example
+/// ```
+/// use sysid_smc::StateSpace;
+/// /// A pendulum: angle and angular velocity.
+/// struct Pendulum;
+/// impl StateSpace for Pendulum {
+///     fn state_dim(&self) -> usize {
+///         2
+///     }
+/// }
+/// assert_eq!(Pendulum.state_dim(), 2);
+/// ```
 pub trait StateSpace {
     /// Dimension of `x`.
     fn state_dim(&self) -> usize;
 }
 
 /// Draws `x_0 ~ mu`.
+/// # Example
+/// `x_0 ~ N(0, 1)`:
+/// ```
+/// use rand_distr::{Distribution, StandardNormal};
+/// use sysid_smc::{InitialSampler, StateSpace};
+/// struct Ar1;
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl InitialSampler for Ar1 {
+///     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+///         x[0] = StandardNormal.sample(rng);
+///     }
+/// }
+/// let mut x = [0.0];
+/// Ar1.sample_initial(&mut x, &mut sysid_smc::stream(1, 0));
+/// assert!(x[0].is_finite());
+/// ```
 pub trait InitialSampler: StateSpace {
     /// Writes a draw of the initial state into `x` (length `state_dim`).
     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R);
@@ -36,6 +64,25 @@ pub trait InitialSampler: StateSpace {
 }
 
 /// Draws `x_{t+1} ~ f(. | x_t, u_t, t)`.
+/// # Example
+/// `x_{t+1} = 0.9 x_t + u_t + w_t`, `w_t ~ N(0, 1)`:
+/// ```
+/// use rand_distr::{Distribution, StandardNormal};
+/// use sysid_smc::{StateSpace, TransitionSampler};
+/// struct Ar1;
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl TransitionSampler for Ar1 {
+///     fn sample_transition<R: rand::Rng + ?Sized>(
+///         &self, _t: usize, x: &[f64], u: &[f64], next: &mut [f64], rng: &mut R,
+///     ) {
+///         let w: f64 = StandardNormal.sample(rng);
+///         next[0] = 0.9 * x[0] + u.first().unwrap_or(&0.0) + w;
+///     }
+/// }
+/// let mut next = [0.0];
+/// Ar1.sample_transition(0, &[1.0], &[], &mut next, &mut sysid_smc::stream(1, 0));
+/// assert!(next[0].is_finite());
+/// ```
 pub trait TransitionSampler: StateSpace {
     /// Writes a draw of the next state into `next`.
     fn sample_transition<R: rand::Rng + ?Sized>(
@@ -67,6 +114,20 @@ pub trait TransitionSampler: StateSpace {
 }
 
 /// `log g(y_t | x_t, u_t, t)`.
+/// # Example
+/// `y_t = x_t + e_t`, `e_t ~ N(0, 0.5)`:
+/// ```
+/// use sysid_smc::{ObservationDensity, StateSpace};
+/// struct Ar1;
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl ObservationDensity for Ar1 {
+///     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+///         let e = y[0] - x[0];
+///         -0.5 * (2.0 * std::f64::consts::PI * 0.5).ln() - e * e // e^2 / (2 * 0.5)
+///     }
+/// }
+/// assert!(Ar1.log_observation(0, &[1.0], &[], &[1.0]) > Ar1.log_observation(0, &[1.0], &[], &[2.0]));
+/// ```
 pub trait ObservationDensity: StateSpace {
     /// The observation log-density. `y` may hold NaN entries (missing) when only some
     /// outputs are missing; steps where every entry is missing are skipped by the
@@ -84,6 +145,29 @@ pub trait ObservationDensity: StateSpace {
 }
 
 /// `log f(x_{t+1} | x_t, u_t, t)`, needed by the backward smoothers.
+/// # Example
+/// The density of `x_{t+1} = 0.9 x_t + w_t`, `w_t ~ N(0, 1)`, with the scalar Gaussian
+/// form that lets the smoothers find the nearest mean in one pass:
+/// ```
+/// use sysid_smc::{ScalarGaussianKernel, StateSpace, TransitionDensity};
+/// struct Ar1;
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl TransitionDensity for Ar1 {
+///     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+///         ScalarGaussianKernel::with_variance(1.0).log_density(0.9 * x[0], next[0])
+///     }
+///     fn scalar_gaussian_means(
+///         &self, _t: usize, _u: &[f64], from: &[f64], means: &mut Vec<f64>,
+///     ) -> Option<ScalarGaussianKernel> {
+///         means.clear();
+///         means.extend(from.iter().map(|x| 0.9 * x));
+///         Some(ScalarGaussianKernel::with_variance(1.0))
+///     }
+/// }
+/// let (mut out, mut scratch) = (vec![0.0; 4], Vec::new());
+/// Ar1.log_transition_matrix(0, &[], &[0.0, 1.0], &[0.0, 0.9], &mut out, &mut scratch);
+/// assert_eq!(out[1], Ar1.log_transition(0, &[1.0], &[], &[0.0])); // to_0 from x = 1
+/// ```
 pub trait TransitionDensity: StateSpace {
     /// The transition log-density of `next` given `x`.
     fn log_transition(&self, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64;
@@ -219,18 +303,82 @@ impl ScalarGaussianKernel {
 
 /// An upper bound `log c >= log f(x' | x, u_t, t)` for all `x, x'`, needed by
 /// rejection-sampling FFBSi.
+/// # Example
+/// A Gaussian transition density is largest at its mean: `log c = -ln(2 pi v) / 2`.
+/// ```
+/// use sysid_smc::{ScalarGaussianKernel, StateSpace, TransitionBound, TransitionDensity};
+/// struct Ar1;
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl TransitionDensity for Ar1 {
+///     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+///         ScalarGaussianKernel::with_variance(1.0).log_density(0.9 * x[0], next[0])
+///     }
+/// }
+/// impl TransitionBound for Ar1 {
+///     fn log_transition_bound(&self, _t: usize, _u: &[f64]) -> f64 {
+///         ScalarGaussianKernel::with_variance(1.0).log_norm
+///     }
+/// }
+/// assert!(Ar1.log_transition(0, &[2.0], &[], &[1.8]) <= Ar1.log_transition_bound(0, &[]));
+/// ```
 pub trait TransitionBound: TransitionDensity {
     /// `log c` at time `t`.
     fn log_transition_bound(&self, t: usize, u: &[f64]) -> f64;
 }
 
 /// Everything the bootstrap particle filter needs.
+/// # Example
+/// Implementing the three capabilities makes a model a `FilterModel`, which the
+/// bootstrap filter runs:
+/// ```
+/// # use rand_distr::{Distribution, StandardNormal};
+/// # use sysid_smc::*;
+/// # struct Ar1;
+/// # impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// # impl InitialSampler for Ar1 {
+/// #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+/// #         x[0] = StandardNormal.sample(rng);
+/// #     }
+/// # }
+/// # impl TransitionSampler for Ar1 {
+/// #     fn sample_transition<R: rand::Rng + ?Sized>(
+/// #         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+/// #     ) {
+/// #         let w: f64 = StandardNormal.sample(rng);
+/// #         next[0] = 0.9 * x[0] + w;
+/// #     }
+/// # }
+/// # impl ObservationDensity for Ar1 {
+/// #     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+/// #         let e = y[0] - x[0];
+/// #         -0.5 * (2.0 * std::f64::consts::PI * 0.5).ln() - e * e
+/// #     }
+/// # }
+/// let y = [0.3, -0.4, 1.2, 0.8];
+/// let mut pf = ParticleFilter::new(FilterOptions { particles: 500, ..Default::default() })?;
+/// let run = pf.run(&Ar1, &Series::new(&y, 1)?, 7)?;
+/// assert!(run.loglik.is_finite());
+/// # Ok::<(), SmcError>(())
+/// ```
 pub trait FilterModel: InitialSampler + TransitionSampler + ObservationDensity {}
 impl<M: InitialSampler + TransitionSampler + ObservationDensity> FilterModel for M {}
 
 /// `log mu(x_0)`, the initial-state log-density, needed with [`TransitionDensity`] and
 /// [`ObservationDensity`] for the complete-data log-likelihood `log p(x, y)` (particle
 /// Gibbs with a Metropolis-within-Gibbs parameter step).
+/// # Example
+/// `x_0 ~ N(0, 1)`:
+/// ```
+/// use sysid_smc::{InitialDensity, StateSpace};
+/// struct Ar1;
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl InitialDensity for Ar1 {
+///     fn log_initial(&self, x: &[f64]) -> f64 {
+///         -0.5 * ((2.0 * std::f64::consts::PI).ln() + x[0] * x[0])
+///     }
+/// }
+/// assert!(Ar1.log_initial(&[0.0]) > Ar1.log_initial(&[1.0]));
+/// ```
 pub trait InitialDensity: StateSpace {
     /// The initial-state log-density of `x`.
     fn log_initial(&self, x: &[f64]) -> f64;
@@ -243,6 +391,46 @@ pub trait InitialDensity: StateSpace {
 /// which keeps them alive when an observation is far from the prediction.
 ///
 /// Called only for steps whose output is fully observed (`y` has no NaN).
+/// # Example
+/// For `x_{t+1} = a x_t + w_t`, `w ~ N(0, q)`, `y_t = x_t + e_t`, `e ~ N(0, r)` and
+/// `x_0 ~ N(0, p0)`, the locally optimal proposal and the predictive densities are
+/// Gaussian (a one-step Kalman update):
+/// ```
+/// use rand_distr::{Distribution, StandardNormal};
+/// use sysid_smc::{GuidedProposal, ScalarGaussianKernel, StateSpace};
+/// struct Ar1 { a: f64, q: f64, r: f64, p0: f64 }
+/// impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// impl Ar1 {
+///     /// Mean and variance of x given a prior N(m, v) and an observation y.
+///     fn update(&self, m: f64, v: f64, y: f64) -> (f64, f64) {
+///         let k = v / (v + self.r);
+///         (m + k * (y - m), (1.0 - k) * v)
+///     }
+/// }
+/// impl GuidedProposal for Ar1 {
+///     fn sample_initial_guided<R: rand::Rng + ?Sized>(&self, _u: &[f64], y: &[f64], x: &mut [f64], rng: &mut R) {
+///         let (m, v) = self.update(0.0, self.p0, y[0]);
+///         let z: f64 = StandardNormal.sample(rng);
+///         x[0] = m + v.sqrt() * z;
+///     }
+///     fn log_initial_predictive(&self, _u: &[f64], y: &[f64]) -> f64 {
+///         ScalarGaussianKernel::with_variance(self.p0 + self.r).log_density(0.0, y[0])
+///     }
+///     fn log_predictive(&self, _t: usize, x: &[f64], _u: &[f64], _u_next: &[f64], y_next: &[f64]) -> f64 {
+///         ScalarGaussianKernel::with_variance(self.q + self.r).log_density(self.a * x[0], y_next[0])
+///     }
+///     fn sample_guided<R: rand::Rng + ?Sized>(
+///         &self, _t: usize, x: &[f64], _u: &[f64], _u_next: &[f64], y_next: &[f64],
+///         next: &mut [f64], rng: &mut R,
+///     ) {
+///         let (m, v) = self.update(self.a * x[0], self.q, y_next[0]);
+///         let z: f64 = StandardNormal.sample(rng);
+///         next[0] = m + v.sqrt() * z;
+///     }
+/// }
+/// let model = Ar1 { a: 0.9, q: 1.0, r: 0.5, p0: 1.0 };
+/// assert!(model.log_predictive(0, &[1.0], &[], &[], &[0.9]) > model.log_predictive(0, &[1.0], &[], &[], &[3.0]));
+/// ```
 pub trait GuidedProposal: StateSpace {
     /// Draws `x_0 ~ p(x_0 | y_0)` into `x`.
     fn sample_initial_guided<R: rand::Rng + ?Sized>(

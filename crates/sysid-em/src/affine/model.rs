@@ -34,6 +34,80 @@ pub struct AffineParams {
 ///
 /// The model supplies the regressors `alpha`, which regressors each row uses, and an
 /// SMC model for given parameters (the particle E-step runs on it).
+///
+/// # Example
+/// The AR(1) model `x' = phi x + w`, `y = x + e` in affine form: one regressor `x`,
+/// `beta_x = [phi]` estimated, `beta_y = [1]` known (held); particle EM then has a
+/// closed-form M-step. (A model file gives this form by itself:
+/// `sysid_modelfile::ModelFile::affine`.)
+/// ```
+/// # use rand_distr::{Distribution, StandardNormal};
+/// # use sysid_smc::*;
+/// # /// x' = phi x + w (w ~ N(0, q)), y = x + e (e ~ N(0, r)), x_0 ~ N(0, 1)
+/// # #[derive(Clone)]
+/// # struct Ar { phi: f64, q: f64, r: f64 }
+/// # impl StateSpace for Ar { fn state_dim(&self) -> usize { 1 } }
+/// # impl InitialSampler for Ar {
+/// #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+/// #         x[0] = StandardNormal.sample(rng);
+/// #     }
+/// # }
+/// # impl TransitionSampler for Ar {
+/// #     fn sample_transition<R: rand::Rng + ?Sized>(
+/// #         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+/// #     ) {
+/// #         let w: f64 = StandardNormal.sample(rng);
+/// #         next[0] = self.phi * x[0] + self.q.sqrt() * w;
+/// #     }
+/// # }
+/// # impl ObservationDensity for Ar {
+/// #     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(self.r).log_density(x[0], y[0])
+/// #     }
+/// # }
+/// # impl TransitionDensity for Ar {
+/// #     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(self.q).log_density(self.phi * x[0], next[0])
+/// #     }
+/// # }
+/// use nalgebra::{dmatrix, dvector};
+/// use sysid_em::affine::{AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams};
+/// use sysid_em::{EmOptions, run_em};
+/// struct ArAffine;
+/// impl AffineModel for ArAffine {
+///     type Smc = Ar;
+///     fn state_dim(&self) -> usize { 1 }
+///     fn output_dim(&self) -> usize { 1 }
+///     fn regressor_dim(&self) -> usize { 1 }
+///     fn regressors(&self, _t: usize, x: &[f64], _u: &[f64], out: &mut [f64]) {
+///         out[0] = x[0];
+///     }
+///     fn held_output_coefficients(&self) -> Vec<Vec<usize>> { vec![vec![0]] }
+///     fn smc_model(&self, p: &AffineParams) -> Result<Ar, AffineEmError> {
+///         Ok(Ar { phi: p.beta_x[(0, 0)], q: p.pi_x[(0, 0)], r: p.pi_y[(0, 0)] })
+///     }
+/// }
+/// let truth = Ar { phi: 0.9, q: 1.0, r: 0.5 };
+/// let (mut x, mut y, mut rng) = ([0.0], Vec::new(), stream(4, 0));
+/// for _ in 0..300 {
+///     let e: f64 = StandardNormal.sample(&mut rng);
+///     y.push(x[0] + 0.5f64.sqrt() * e);
+///     let mut next = [0.0];
+///     truth.sample_transition(0, &x, &[], &mut next, &mut rng);
+///     x = next;
+/// }
+/// let start = AffineParams {
+///     beta_x: dmatrix![0.5], beta_y: dmatrix![1.0], pi_x: dmatrix![1.0], pi_y: dmatrix![0.5],
+///     mu: dvector![0.0], p1: dmatrix![1.0],
+/// };
+/// let spec = AffineEmSpec { pi_x: sysid_em::linear::Covariance::Fixed,
+///     pi_y: sysid_em::linear::Covariance::Fixed, ..AffineEmSpec::default() };
+/// let mut em = AffineEm::new(&ArAffine, Series::new(&y, 1)?, 100, Tanizaki::default(), spec, 1)?;
+/// let options = EmOptions { max_iterations: 20, tol: 0.0, ..EmOptions::default() }.check()?;
+/// let fit = run_em(&mut em, start, &options, &mut ());
+/// assert!((fit.estimate.beta_x[(0, 0)] - 0.9).abs() < 0.15);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait AffineModel: Sync {
     /// The SMC model at given parameters.
     type Smc: FilterModel + TransitionDensity + Sync;

@@ -25,6 +25,66 @@ pub enum Gradients {
 /// The gradient methods add `d/dtheta` of the log-density into `grad` and return the
 /// value; they are called only when [`gradients`](Self::gradients) says
 /// [`Gradients::Analytic`]. Their defaults add nothing.
+///
+/// # Example
+/// The AR(1) model with `theta = (phi, ln q)` (`r = 0.5` known), gradients by finite
+/// differences (the default). (A model file gives this form by itself, with analytic
+/// gradients: `sysid_modelfile::ModelFile::gradient`.)
+/// ```
+/// # use rand_distr::{Distribution, StandardNormal};
+/// # use sysid_smc::*;
+/// # /// x' = phi x + w (w ~ N(0, q)), y = x + e (e ~ N(0, r)), x_0 ~ N(0, 1)
+/// # #[derive(Clone)]
+/// # struct Ar { phi: f64, q: f64, r: f64 }
+/// # impl StateSpace for Ar { fn state_dim(&self) -> usize { 1 } }
+/// # impl InitialSampler for Ar {
+/// #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+/// #         x[0] = StandardNormal.sample(rng);
+/// #     }
+/// # }
+/// # impl TransitionSampler for Ar {
+/// #     fn sample_transition<R: rand::Rng + ?Sized>(
+/// #         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+/// #     ) {
+/// #         let w: f64 = StandardNormal.sample(rng);
+/// #         next[0] = self.phi * x[0] + self.q.sqrt() * w;
+/// #     }
+/// # }
+/// # impl ObservationDensity for Ar {
+/// #     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(self.r).log_density(x[0], y[0])
+/// #     }
+/// # }
+/// # impl TransitionDensity for Ar {
+/// #     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(self.q).log_density(self.phi * x[0], next[0])
+/// #     }
+/// # }
+/// use sysid_em::gradient::{GradientEmError, GradientModel};
+/// struct ArGradient;
+/// impl GradientModel for ArGradient {
+///     type Smc = Ar;
+///     type Params = Ar;
+///     fn parameter_dim(&self) -> usize { 2 }
+///     fn state_dim(&self) -> usize { 1 }
+///     fn parameter_names(&self) -> Vec<String> { vec!["phi".into(), "q".into()] }
+///     fn constrained(&self, theta: &[f64]) -> Vec<f64> { vec![theta[0], theta[1].exp()] }
+///     fn smc_model(&self, theta: &[f64]) -> Result<Ar, GradientEmError> { Ok(self.unpack(theta)) }
+///     fn unpack(&self, theta: &[f64]) -> Ar { Ar { phi: theta[0], q: theta[1].exp(), r: 0.5 } }
+///     fn log_initial(&self, _p: &Ar, x: &[f64]) -> f64 {
+///         ScalarGaussianKernel::with_variance(1.0).log_density(0.0, x[0])
+///     }
+///     fn log_transition(&self, p: &Ar, t: usize, x: &[f64], u: &[f64], next: &[f64]) -> f64 {
+///         p.log_transition(t, x, u, next)
+///     }
+///     fn log_observation(&self, p: &Ar, t: usize, x: &[f64], u: &[f64], y: &[f64]) -> f64 {
+///         p.log_observation(t, x, u, y)
+///     }
+/// }
+/// let p = ArGradient.unpack(&[0.9, 0.0]);
+/// assert_eq!(ArGradient.constrained(&[0.9, 0.0]), [0.9, 1.0]);
+/// assert!(ArGradient.log_transition(&p, 0, &[1.0], &[], &[0.9]) > ArGradient.log_transition(&p, 0, &[1.0], &[], &[3.0]));
+/// ```
 pub trait GradientModel: Sync {
     /// The particle model at `theta`, for the E-step.
     type Smc: FilterModel + TransitionDensity + Sync;
@@ -135,6 +195,33 @@ pub trait GradientModel: Sync {
 
 /// `I3(theta) = (1/K) sum_k sum_t log g_theta(y_t | x_t^k)` on the trajectories it was
 /// prepared from ([`GradientModel::prepare_observations`]).
+///
+/// # Example
+/// For `y = x + e`, `e ~ N(0, exp(z))`, with `z` the model's only observation
+/// parameter (entry 1 of `theta`), `I3` depends on the paths only through the mean
+/// squared residual, computed once:
+/// ```
+/// use sysid_em::gradient::ObservationSum;
+/// struct Residuals { mean_square: f64, count: f64 }
+/// impl ObservationSum for Residuals {
+///     fn value_and_gradient(&self, theta: &[f64], grad: &mut [f64]) -> f64 {
+///         let (r, n) = (theta[1].exp(), self.count);
+///         grad.fill(0.0);
+///         grad[1] = -0.5 * n + 0.5 * n * self.mean_square / r;
+///         -0.5 * n * ((2.0 * std::f64::consts::PI * r).ln() + self.mean_square / r)
+///     }
+///     fn maximise(&self, theta: &mut [f64]) -> bool {
+///         theta[1] = self.mean_square.ln(); // r = the mean squared residual
+///         true
+///     }
+/// }
+/// let sum = Residuals { mean_square: 0.5, count: 100.0 };
+/// let mut theta = [0.9, 0.0];
+/// assert!(sum.maximise(&mut theta));
+/// let mut grad = [0.0; 2];
+/// sum.value_and_gradient(&theta, &mut grad);
+/// assert!(grad[1].abs() < 1e-12);
+/// ```
 pub trait ObservationSum {
     /// `I3(theta)`, adding its gradient into `grad` (all of `theta`'s entries).
     fn value_and_gradient(&self, theta: &[f64], grad: &mut [f64]) -> f64;

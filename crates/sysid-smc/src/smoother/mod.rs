@@ -69,6 +69,60 @@ impl SmootherStats {
 }
 
 /// A particle smoother usable with model `M`.
+///
+/// # Example
+/// A smoother is chosen by value and run on a filter's history; a new smoother
+/// implements both methods (here, one that delegates to the genealogy smoother):
+/// ```
+/// # use rand_distr::{Distribution, StandardNormal};
+/// # use sysid_smc::*;
+/// # struct Ar1;
+/// # impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// # impl InitialSampler for Ar1 {
+/// #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+/// #         x[0] = StandardNormal.sample(rng);
+/// #     }
+/// # }
+/// # impl TransitionSampler for Ar1 {
+/// #     fn sample_transition<R: rand::Rng + ?Sized>(
+/// #         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+/// #     ) {
+/// #         let w: f64 = StandardNormal.sample(rng);
+/// #         next[0] = 0.9 * x[0] + w;
+/// #     }
+/// # }
+/// # impl ObservationDensity for Ar1 {
+/// #     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+/// #         let e = y[0] - x[0];
+/// #         -0.5 * (2.0 * std::f64::consts::PI * 0.5).ln() - e * e
+/// #     }
+/// # }
+/// # impl TransitionDensity for Ar1 {
+/// #     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(1.0).log_density(0.9 * x[0], next[0])
+/// #     }
+/// # }
+/// struct Ancestry;
+/// impl<M: StateSpace> Smoother<M> for Ancestry {
+///     fn trajectories(&self, model: &M, history: &History, data: &Series, seed: u64)
+///         -> Result<(Trajectories, SmootherStats), SmcError> {
+///         Genealogy { paths: 10 }.trajectories(model, history, data, seed)
+///     }
+///     fn additive<F: AdditiveFunctional + ?Sized>(&self, model: &M, history: &History,
+///         data: &Series, seed: u64, functional: &mut F) -> Result<SmootherStats, SmcError> {
+///         Genealogy { paths: 10 }.additive(model, history, data, seed, functional)
+///     }
+/// }
+/// let y = [0.3, -0.4, 1.2, 0.8];
+/// let data = Series::new(&y, 1)?;
+/// let mut pf = ParticleFilter::new(FilterOptions {
+///     particles: 100, store_history: true, ..Default::default()
+/// })?;
+/// pf.run(&Ar1, &data, 1)?;
+/// let (paths, _) = Ancestry.trajectories(&Ar1, pf.history().unwrap(), &data, 3)?;
+/// assert_eq!(paths.paths(), 10);
+/// # Ok::<(), SmcError>(())
+/// ```
 pub trait Smoother<M> {
     /// Draws smoothed trajectories from the filter history.
     fn trajectories(

@@ -153,6 +153,50 @@ pub(crate) fn feed_step<F: AdditiveFunctional + ?Sized>(
 /// equations) use every step, transition terms skip the last one.
 ///
 /// Any closure `FnMut(usize, &[f64], Option<&[f64]>, f64)` is a functional.
+///
+/// # Example
+/// The smoothed mean of `sum_t x_t^2`, by rejection-free FFBSi, with a closure:
+/// ```
+/// # use rand_distr::{Distribution, StandardNormal};
+/// # use sysid_smc::*;
+/// # struct Ar1;
+/// # impl StateSpace for Ar1 { fn state_dim(&self) -> usize { 1 } }
+/// # impl InitialSampler for Ar1 {
+/// #     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+/// #         x[0] = StandardNormal.sample(rng);
+/// #     }
+/// # }
+/// # impl TransitionSampler for Ar1 {
+/// #     fn sample_transition<R: rand::Rng + ?Sized>(
+/// #         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+/// #     ) {
+/// #         let w: f64 = StandardNormal.sample(rng);
+/// #         next[0] = 0.9 * x[0] + w;
+/// #     }
+/// # }
+/// # impl ObservationDensity for Ar1 {
+/// #     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+/// #         let e = y[0] - x[0];
+/// #         -0.5 * (2.0 * std::f64::consts::PI * 0.5).ln() - e * e
+/// #     }
+/// # }
+/// # impl TransitionDensity for Ar1 {
+/// #     fn log_transition(&self, _t: usize, x: &[f64], _u: &[f64], next: &[f64]) -> f64 {
+/// #         ScalarGaussianKernel::with_variance(1.0).log_density(0.9 * x[0], next[0])
+/// #     }
+/// # }
+/// let y = [0.3, -0.4, 1.2, 0.8];
+/// let data = Series::new(&y, 1)?;
+/// let mut pf = ParticleFilter::new(FilterOptions {
+///     particles: 200, store_history: true, ..Default::default()
+/// })?;
+/// pf.run(&Ar1, &data, 1)?;
+/// let mut energy = 0.0;
+/// let mut functional = |_t: usize, x: &[f64], _next: Option<&[f64]>, w: f64| energy += w * x[0] * x[0];
+/// Ffbsi { paths: 50, parallel: false }.additive(&Ar1, pf.history().unwrap(), &data, 2, &mut functional)?;
+/// assert!(energy > 0.0);
+/// # Ok::<(), SmcError>(())
+/// ```
 pub trait AdditiveFunctional {
     /// Adds `weight * s(t, x, next)`.
     fn add(&mut self, t: usize, x: &[f64], next: Option<&[f64]>, weight: f64);

@@ -31,6 +31,23 @@ pub fn parse_model_file(text: &str) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
+/// Parses and checks `text` as a nonlinear model file (TOML); when it is valid,
+/// simulates its model for 5 steps (inputs 0) and evaluates its densities there.
+pub fn parse_nonlinear_model(text: &str) -> Result<(), String> {
+    use sysid::smc::{ObservationDensity, TransitionDensity};
+    let model = sysid::modelfile::ModelFile::parse(text, "fuzz.toml").map_err(|e| e.to_string())?;
+    let smc = model.at(&model.free_values())?;
+    let inputs = vec![0.0; 5 * smc.input_dim()];
+    let (states, outputs) = smc.simulate(5, &inputs, 1)?;
+    let (n, p, m) = (smc.spec().states.len(), smc.output_dim(), smc.input_dim());
+    let u = vec![0.0; m];
+    let _ = smc.log_observation(0, &states[..n], &u, &outputs[..p]);
+    let _ = smc.log_transition(0, &states[..n], &u, &states[n..2 * n]);
+    let _ = model.affine();
+    let _ = model.gradient();
+    Ok(())
+}
+
 /// Parses a command line (without running it).
 pub fn parse_command_line(args: &[String]) -> Result<(), String> {
     use clap::Parser;

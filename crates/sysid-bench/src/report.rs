@@ -411,12 +411,12 @@ pub fn run(a: &Args) -> Result<(), String> {
         .unwrap_or(Path::new("."));
     if let Some(figure) = figure {
         let svg = figure.to_svg().map_err(|e| e.to_string())?;
-        sysid_plot::write_atomically(&dir.join("benchmarks.svg"), true, |w| {
+        sysid_output::write_atomically(&dir.join("benchmarks.svg"), true, |w| {
             std::io::Write::write_all(w, svg.as_bytes())
         })
         .map_err(|e| e.to_string())?;
     }
-    sysid_plot::write_atomically(&a.out, true, |w| {
+    sysid_output::write_atomically(&a.out, true, |w| {
         std::io::Write::write_all(w, md.as_bytes())
     })
     .map_err(|e| e.to_string())?;

@@ -29,6 +29,9 @@ pub enum CliError {
     },
     #[error("{0}")]
     Plot(sysid_plot::PlotError),
+    /// An output file that cannot be written as asked (not a regular file).
+    #[error("{0}")]
+    Output(sysid_output::OutputError),
     #[error("{path}: the file is empty (expected a header line)")]
     EmptyFile { path: PathBuf },
     #[error("{path}, line 1: column {position} repeats the name {column:?}")]
@@ -236,6 +239,16 @@ impl CliError {
             EXIT_BAD_INPUT
         } else {
             EXIT_FAILURE
+        }
+    }
+}
+
+impl From<sysid_output::OutputError> for CliError {
+    fn from(e: sysid_output::OutputError) -> CliError {
+        match e {
+            sysid_output::OutputError::Io { path, source } => CliError::Io { path, source },
+            sysid_output::OutputError::WouldOverwrite { path } => CliError::WouldOverwrite { path },
+            other => CliError::Output(other),
         }
     }
 }

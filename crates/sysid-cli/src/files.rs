@@ -6,7 +6,7 @@ use std::fs::File;
 use std::io::Write;
 use std::path::Path;
 use sysid::kalman::{LinearGaussianModel, Metadata, ModelSpec, Record};
-use sysid_plot::PendingFile;
+use sysid_output::PendingFile;
 
 /// Where an output goes: a file written atomically, or standard output (`-`).
 pub enum Output {
@@ -84,8 +84,8 @@ pub fn refuse_existing<'a>(
             crate::claim_stdout();
             continue;
         }
-        if !sysid_plot::is_replaceable(path) {
-            return Err(CliError::Plot(sysid_plot::PlotError::NotAFile {
+        if !sysid_output::is_replaceable(path) {
+            return Err(CliError::Output(sysid_output::OutputError::NotAFile {
                 path: path.to_path_buf(),
             }));
         }

@@ -1,6 +1,6 @@
 //! Drawing a [`Figure`] with plotters, on the SVG and the bitmap backend.
 
-use crate::output::{PlotError, commit, temporary_path};
+use crate::output::PlotError;
 use crate::{Figure, Panel, Scale, Series, Stroke};
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
@@ -58,20 +58,18 @@ pub fn svg(figure: &Figure) -> Result<String, PlotError> {
 pub fn png(figure: &Figure, target: &Path, overwrite: bool) -> Result<(), PlotError> {
     register_fonts();
     check_data(figure)?;
-    let temporary = temporary_path(target);
+    let pending = sysid_output::PendingPath::create(target, overwrite)?;
     let drawn = {
-        let root = BitMapBackend::new(&temporary, figure.size()).into_drawing_area();
+        let root = BitMapBackend::new(pending.path(), figure.size()).into_drawing_area();
         draw_figure(&root, figure).and_then(|()| root.present().map_err(|e| e.to_string()))
     };
     match drawn {
-        Ok(()) => commit(&temporary, target, overwrite),
-        Err(message) => {
-            let _ = std::fs::remove_file(&temporary);
-            Err(PlotError::Draw {
-                path: target.to_path_buf(),
-                message,
-            })
-        }
+        Ok(()) => Ok(pending.commit()?),
+        // dropping `pending` removes what was drawn
+        Err(message) => Err(PlotError::Draw {
+            path: target.to_path_buf(),
+            message,
+        }),
     }
 }
 

@@ -39,7 +39,7 @@ mod draw;
 mod output;
 pub mod trajectories;
 
-pub use output::{PendingFile, PlotError, is_replaceable, write_atomically};
+pub use output::PlotError;
 
 use std::path::{Path, PathBuf};
 
@@ -247,7 +247,7 @@ impl Figure {
             return Err(PlotError::WouldOverwrite { path: path.clone() });
         }
         let svg = self.to_svg()?;
-        write_atomically(&svg_path, overwrite, |file| {
+        sysid_output::write_atomically(&svg_path, overwrite, |file| {
             std::io::Write::write_all(file, svg.as_bytes())
         })?;
         draw::png(self, &png_path, overwrite)?;

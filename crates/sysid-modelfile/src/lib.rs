@@ -1,6 +1,8 @@
 //! Nonlinear state-space models from a model file (`docs/model-format.md`): one
 //! definition that the particle filters and smoothers, particle EM (closed form when
-//! the equations are affine in the free parameters), gradient EM and PMMH all use.
+//! the equations are affine in the free parameters), gradient EM and PMMH all use. For
+//! a model the file format cannot express, [`GaussianModel`] is the same in Rust: one
+//! impl of the mean maps, the noise variances and the initial law.
 //!
 //! # Model
 //! ```text
@@ -63,13 +65,16 @@
 pub mod affine;
 pub mod builtin;
 pub mod expr;
+pub mod gaussian;
 pub mod gradient;
 pub mod program;
+mod shared;
 mod smc;
 pub mod spec;
 mod write;
 
 pub use affine::ExprAffine;
+pub use gaussian::{Gaussian, GaussianModel, GaussianSmc};
 pub use gradient::ExprGradient;
 pub use smc::ExprSmc;
 pub use spec::{FORMAT, ModelFileError, ModelSpec, Parameter};

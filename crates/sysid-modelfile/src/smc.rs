@@ -7,7 +7,6 @@ use crate::spec::ModelSpec;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use std::sync::Arc;
-use sysid_linalg::LN_2PI;
 use sysid_smc::{
     InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel, StateSpace,
     TransitionBound, TransitionDensity, TransitionSampler, add_scaled_normals,
@@ -152,40 +151,21 @@ impl ExprSmc {
         inputs: &[f64],
         seed: u64,
     ) -> Result<(Vec<f64>, Vec<f64>), String> {
-        let (n, p, m) = (self.state_dim(), self.output_dim(), self.input_dim());
-        if inputs.len() != steps * m {
-            return Err(format!(
-                "{} input values given for {steps} steps of {m} inputs",
-                inputs.len()
-            ));
-        }
-        let mut rng = sysid_smc::stream(seed, 0);
-        let mut x = vec![0.0; n];
-        self.sample_initial(&mut x, &mut rng);
-        let mut states = Vec::with_capacity(steps * n);
-        let mut outputs = Vec::with_capacity(steps * p);
-        let mut next = vec![0.0; n];
-        for t in 0..steps {
-            let u = &inputs[t * m..(t + 1) * m];
-            states.extend_from_slice(&x);
-            {
-                let lookup = self.lookup(t, u, &x);
-                for (g, noise) in self.compiled.spec.observation.iter().zip(&self.measurement) {
-                    let z: f64 = StandardNormal.sample(&mut rng);
-                    outputs.push(g.eval(&lookup) + noise.sd * z);
-                }
+        let sds: Vec<f64> = self.measurement.iter().map(|v| v.sd).collect();
+        let spec = &self.compiled.spec;
+        let observation = |t: usize, x: &[f64], u: &[f64], out: &mut [f64]| {
+            let lookup = self.lookup(t, u, x);
+            for (o, g) in out.iter_mut().zip(&spec.observation) {
+                *o = g.eval(&lookup);
             }
-            self.sample_transition(t, &x, u, &mut next, &mut rng);
-            if let Some(bad) = next
-                .iter()
-                .chain(&outputs[t * p..])
-                .find(|v| !v.is_finite())
-            {
-                return Err(format!("the simulation diverged at step {t} (value {bad})"));
-            }
-            std::mem::swap(&mut x, &mut next);
-        }
-        Ok((states, outputs))
+        };
+        crate::shared::simulate(
+            self,
+            (steps, inputs, self.input_dim()),
+            &sds,
+            seed,
+            observation,
+        )
     }
 
     /// Number of outputs.
@@ -318,18 +298,7 @@ impl InitialDensity for ExprSmc {
     /// The product of the states' normal densities; a state of initial variance 0 is
     /// a point mass (log-density 0 at its mean, `-inf` elsewhere).
     fn log_initial(&self, x: &[f64]) -> f64 {
-        let mut total = 0.0;
-        for ((&xi, &m), &v) in x.iter().zip(&self.initial_mean).zip(&self.initial_var) {
-            if v == 0.0 {
-                if xi != m {
-                    return f64::NEG_INFINITY;
-                }
-                continue;
-            }
-            let e = xi - m;
-            total += -0.5 * (LN_2PI + v.ln()) - 0.5 * e * e / v;
-        }
-        total
+        crate::shared::log_initial(x, &self.initial_mean, &self.initial_var)
     }
 }
 

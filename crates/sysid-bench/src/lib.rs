@@ -17,6 +17,7 @@ mod kalman;
 mod lti2x2;
 mod modelfile_em;
 mod nlbench_em;
+pub mod nlbench_study;
 mod pendulum_em;
 mod pmcmc;
 pub mod report;

@@ -6,12 +6,12 @@
 //! standard errors.
 
 use crate::emit;
+use crate::nlbench_study::{NlbenchStudy, abcd};
 use rand::RngExt;
 use rayon::prelude::*;
 use serde_json::json;
 use sysid::em::affine::AffineEm;
 use sysid::em::{EmOptions, run_em};
-use sysid::models::nlbench_study::{NlbenchStudy, abcd};
 use sysid::models::{Nlbench, NlbenchAffine};
 use sysid::smc::{Series, Tanizaki, stream};
 

@@ -7,11 +7,11 @@
 //! runs with `r % n == i`) merge into exactly the unsharded output.
 
 use crate::emit;
+use crate::nlbench_study::{Method, NlbenchStudy, abcd, within_ten_percent as converged};
 use rayon::prelude::*;
 use serde_json::json;
 use std::io::Write;
 use sysid::em::affine::{RobustFit, RobustOptions, describe};
-use sysid::models::nlbench_study::{Method, NlbenchStudy, abcd, within_ten_percent as converged};
 use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
 use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki};
 

@@ -19,7 +19,6 @@ mod gaussian_affine;
 mod gradient_lgss;
 mod linear_smc;
 mod nlbench;
-pub mod nlbench_study;
 mod pendulum;
 mod truncated_normal;
 mod wiener;

@@ -20,13 +20,13 @@ use sysid::em::EmOptions;
 use sysid::em::affine::RobustOptions;
 use sysid::em::linear::fit;
 use sysid::kalman::{KalmanWorkspace, LinearGaussianModel};
-use sysid::models::nlbench_study::{Method, NlbenchRun, NlbenchStudy, abcd, within_ten_percent};
 use sysid::models::{
     Nlbench, NlbenchParams, System, lti2x2, lti2x2_em_spec, lti2x2_experiment_start,
     lti2x2_paper_start,
 };
 use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, Tanizaki};
 use sysid::subspace::{N4sidOptions, Order, n4sid};
+use sysid_bench::nlbench_study::{Method, NlbenchRun, NlbenchStudy, abcd, within_ten_percent};
 use sysid_plot::trajectories::{Run, parameter_trajectories};
 use sysid_plot::{Band, Figure, Panel, Scale, Series as Curve, Stroke};
 

@@ -1,4 +1,5 @@
-//! The seed-000 particle-EM study on [`Nlbench`]: one run = one seeded data set, one
+//! The seed-000 particle-EM study on [`Nlbench`] (experiment settings live with the
+//! runners, not in the model zoo): one run = one seeded data set, one
 //! random start around the truth, one EM run. Shared by the `nlbench-em` runner and the
 //! demo, so both run the same experiment.
 //!
@@ -9,14 +10,14 @@
 //! result depends only on `(s, r)`, so runs can go in parallel, in any order, or on
 //! different machines.
 
-use crate::{Nlbench, NlbenchAffine, NlbenchParams};
 use rand::RngExt;
-use sysid_em::affine::{
+use sysid::em::affine::{
     AffineEm, AffineEmError, AffineEmSpec, AffineParams, RobustFit, RobustOptions, fit_robust,
 };
-use sysid_em::linear::Covariance;
-use sysid_em::{EmObserver, EmOptions, IterationInfo, OptionsError, run_em};
-use sysid_smc::{Series, Smoother, stream};
+use sysid::em::linear::Covariance;
+use sysid::em::{EmObserver, EmOptions, IterationInfo, OptionsError, run_em};
+use sysid::models::{Nlbench, NlbenchAffine, NlbenchParams};
+use sysid::smc::{Series, Smoother, stream};
 use thiserror::Error;
 
 /// How a study's runs fit the model.

@@ -252,6 +252,6 @@ fn model_file_mistakes_are_one_line_errors_with_line_and_column() {
     let out = sysid(&["pf", "--system", "duffing", "--data", s(&data)]);
     assert_one_line_error(
         &out,
-        &["unknown system \"duffing\"", "nlbench, lgss, pendulum"],
+        &["unknown system \"duffing\"", "lgss, nlbench, pendulum"],
     );
 }

@@ -21,6 +21,7 @@ pub mod resid;
 pub mod simulate;
 pub mod simulate_model;
 pub mod smooth;
+pub mod systems;
 pub mod tf;
 
 use crate::DataArgs;

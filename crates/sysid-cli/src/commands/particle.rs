@@ -167,12 +167,17 @@ fn choose_model(a: &ParticleArgs) -> Result<ChosenModel, CliError> {
         })
     };
     match (&a.system, &a.model) {
-        (Some(name), _) if name == "nlbench" => Ok(ChosenModel::Nlbench(Nlbench::truth())),
-        (Some(name), _) if name == "lgss" => Ok(ChosenModel::Linear(Box::new(adapt(
-            &lgss(),
-            "lgss".into(),
-        )?))),
-        (Some(name), _) => file_model(super::nonlinear::system(name)?),
+        (Some(name), _) => {
+            use super::systems::{System, Use, lookup};
+            match lookup(name, Use::Particle)? {
+                System::Nlbench => Ok(ChosenModel::Nlbench(Nlbench::truth())),
+                System::Lgss => Ok(ChosenModel::Linear(Box::new(adapt(
+                    &lgss(),
+                    "lgss".into(),
+                )?))),
+                _ => file_model(super::nonlinear::system(name)?),
+            }
+        }
         (None, Some(path)) if super::nonlinear::is_model_file(path) => {
             file_model(super::nonlinear::read(path)?)
         }

@@ -91,8 +91,14 @@ impl ChainArgs {
     fn model_file(&self) -> Result<Option<sysid::modelfile::ModelFile>, CliError> {
         match (&self.system, &self.model) {
             (_, Some(path)) => Ok(Some(super::nonlinear::read(path)?)),
-            (Some(name), None) if name == "lgss" || name == "nlbench" => Ok(None),
-            (Some(name), None) => Ok(Some(super::nonlinear::system(name)?)),
+            (Some(name), None) => {
+                use super::systems::{System, Use, lookup};
+                match lookup(name, Use::Particle)? {
+                    // the hand-tuned families
+                    System::Lgss | System::Nlbench => Ok(None),
+                    _ => Ok(Some(super::nonlinear::system(name)?)),
+                }
+            }
             (None, None) => Err(bad("--model", "give --model FILE.toml or --system NAME")),
         }
     }

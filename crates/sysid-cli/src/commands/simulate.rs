@@ -86,16 +86,21 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         &format!("{} steps", o.steps),
         8.0 * 3.0 * o.steps as f64,
     )?;
-    if system_name == "nlbench" {
-        return run_nlbench(o);
-    }
-    if system_name == "wiener" {
-        return run_wiener(o);
-    }
-    let system = System::from_name(system_name).ok_or_else(|| CliError::UnknownSystem {
-        name: system_name.to_string(),
-        known: System::ALL.map(System::name).join(", ") + ", nlbench, wiener",
-    })?;
+    use super::systems::{System as Builtin, Use, lookup};
+    let system = match lookup(system_name, Use::Simulate)? {
+        Builtin::Nlbench => return run_nlbench(o),
+        Builtin::Wiener => return run_wiener(o),
+        Builtin::Lgss => System::Lgss,
+        Builtin::Lti2x2 => System::Lti2x2,
+        Builtin::Pendulum => {
+            return Err(CliError::BadOption {
+                option: "simulate",
+                message: "pendulum is driven by a torque input: simulate its model file with \
+                          --model crates/sysid-modelfile/models/pendulum.toml --data INPUTS.csv"
+                    .into(),
+            });
+        }
+    };
     let sim = system
         .simulate(o.steps, o.seed)
         .map_err(|source| CliError::Kalman {

@@ -63,6 +63,8 @@ pub struct ExprSmc {
 }
 
 thread_local! {
+    /// The parents' states of a scalar model, gathered once per step.
+    static GATHER: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
     /// Columns and registers reused across calls on one thread.
     static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
@@ -262,8 +264,11 @@ pub(crate) fn with_lanes<T>(
         let mut guard = cell.borrow_mut();
         let (columns, regs, slots) = &mut *guard;
         program.uniforms(lookup, slots);
-        let cols: Vec<&[f64]> = if n == 1 {
-            vec![states]
+        // a scalar state is its own column (no copy, no allocation)
+        let one = [states];
+        let many: Vec<&[f64]>;
+        let cols: &[&[f64]] = if n == 1 {
+            &one
         } else {
             columns.resize(n * lanes, 0.0);
             for (k, x) in states.chunks_exact(n).enumerate() {
@@ -271,10 +276,11 @@ pub(crate) fn with_lanes<T>(
                     columns[i * lanes + k] = v;
                 }
             }
-            columns.chunks_exact(lanes.max(1)).take(n).collect()
+            many = columns.chunks_exact(lanes.max(1)).take(n).collect();
+            &many
         };
-        program.run(&cols, lanes, slots, regs);
-        let view = |k: usize| program.result(k, &cols, lanes, slots, regs);
+        program.run(cols, lanes, slots, regs);
+        let view = |k: usize| program.result(k, cols, lanes, slots, regs);
         use_results(&view, lanes)
     })
 }
@@ -329,16 +335,30 @@ impl TransitionSampler for ExprSmc {
         rng: &mut R,
     ) {
         let n = self.state_dim();
-        // gather the parents into `next`, then compute in place
-        for (x, &p) in next.chunks_exact_mut(n).zip(parents) {
-            x.copy_from_slice(&from[p * n..(p + 1) * n]);
-        }
         if n == 1 {
-            let mut means = Vec::new();
-            self.transition_means(t, u, next, &mut means);
-            next.copy_from_slice(&means);
+            // gather the parents, then the means straight into `next`
+            GATHER.with(|cell| {
+                let mut gathered = cell.borrow_mut();
+                gathered.clear();
+                gathered.extend(parents.iter().map(|&p| from[p]));
+                let uniforms = self.lookup(t, u, &[]);
+                with_lanes(
+                    &self.compiled.transition,
+                    1,
+                    &uniforms,
+                    &gathered,
+                    |view, _| match view(0) {
+                        Values::Lanes(means) => next.copy_from_slice(means),
+                        Values::Scalar(mean) => next.fill(mean),
+                    },
+                );
+            });
             add_scaled_normals(rng, self.process[0].sd, next);
             return;
+        }
+        // gather the parents into `next`, then compute the means by state
+        for (x, &p) in next.chunks_exact_mut(n).zip(parents) {
+            x.copy_from_slice(&from[p * n..(p + 1) * n]);
         }
         let mut means = Vec::new();
         self.transition_means(t, u, next, &mut means);

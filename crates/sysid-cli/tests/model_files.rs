@@ -255,3 +255,38 @@ fn model_file_mistakes_are_one_line_errors_with_line_and_column() {
         &["unknown system \"duffing\"", "lgss, nlbench, pendulum"],
     );
 }
+
+/// `fit` refuses an option its model class does not use, naming the classes that do
+/// (such options used to be ignored in silence).
+#[test]
+fn fit_refuses_the_options_of_other_model_classes() {
+    let dir = scratch_dir();
+    let data = dir.join("nl.csv");
+    ok(&["simulate", "nlbench", "--steps", "50", "--out", s(&data)]);
+    let out_file = dir.join("f.json");
+    let cases: [(&[&str], &[&str]); 4] = [
+        (
+            &["lti", "--particles", "50"],
+            &["--particles", "does not apply to fit lti", "fit nlbench"],
+        ),
+        (
+            &["nlbench", "--order", "2"],
+            &["--order", "does not apply to fit nlbench", "fit lti"],
+        ),
+        (
+            &["wiener", "--method", "em"],
+            &["--method", "does not apply to fit wiener"],
+        ),
+        (
+            &["lti", "--estimate-noise"],
+            &["--estimate-noise", "fit nlbench, fit affine"],
+        ),
+    ];
+    for (args, needles) in cases {
+        let mut all = vec!["fit"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--data", s(&data), "--out", s(&out_file)]);
+        assert_one_line_error(&sysid(&all), needles);
+        assert!(!out_file.exists());
+    }
+}

@@ -261,6 +261,77 @@ fn initial_model(
     Ok(model)
 }
 
+/// Each option that not every model class uses: whether it was given (differs from
+/// its default) and the classes it applies to (`model` is `--model FILE.toml`).
+fn class_options(o: &Options) -> [(&'static str, bool, &'static [&'static str]); 26] {
+    const LTI: &[&str] = &["lti"];
+    const PARTICLE: &[&str] = &["nlbench", "affine", "wiener", "model"];
+    const PARTICLE_EM: &[&str] = &["nlbench", "affine", "model"];
+    [
+        ("--order", o.order.is_some(), LTI),
+        ("--init", o.init != "n4sid", &["lti", "nlbench", "affine"]),
+        ("--system", o.system.is_some(), &["affine"]),
+        ("--fix", !o.fix.is_empty(), LTI),
+        ("--diag", !o.diag.is_empty(), LTI),
+        ("--min-variance", o.min_variance != 0.0, LTI),
+        ("--min-output-noise", o.min_output_noise != 0.0, LTI),
+        ("--full-r", o.full_r, LTI),
+        ("--stable", o.stable, LTI),
+        ("--offset", o.offset, LTI),
+        ("--estimate-initial", o.estimate_initial, LTI),
+        ("--initial", o.initial != "model", LTI),
+        ("--accelerate", o.accelerate != "squarem", LTI),
+        ("--polish", o.polish != "auto", LTI),
+        ("--std-errors", o.std_errors != "auto", LTI),
+        ("--detrend", o.detrend != "none", LTI),
+        ("--split", o.split.is_some(), LTI),
+        ("--select", o.select != "bic", LTI),
+        ("--tol-nats", o.tol_nats != 1e-4, LTI),
+        ("--tol", o.tol.is_some(), LTI),
+        ("--particles", o.particles != 100, PARTICLE),
+        ("--seed", o.seed != 1, PARTICLE),
+        ("--smoother", o.smoother != "tanizaki", PARTICLE_EM),
+        ("--method", o.method != "robust", PARTICLE_EM),
+        ("--starts", o.starts != 8, PARTICLE_EM),
+        (
+            "--estimate-noise",
+            o.estimate_noise.is_some(),
+            &["nlbench", "affine"],
+        ),
+    ]
+}
+
+/// Refuses an option the model class does not use (it used to be ignored in silence).
+fn refuse_other_class_options(o: &Options, class: &str) -> Result<(), CliError> {
+    for (option, given, classes) in class_options(o) {
+        if given && !classes.contains(&class) {
+            let users: Vec<String> = classes
+                .iter()
+                .map(|c| {
+                    if *c == "model" {
+                        "fit --model".to_string()
+                    } else {
+                        format!("fit {c}")
+                    }
+                })
+                .collect();
+            let what = if class == "model" {
+                "a model file (fit --model)".to_string()
+            } else {
+                format!("fit {class}")
+            };
+            return Err(CliError::BadOption {
+                option,
+                message: format!(
+                    "does not apply to {what}; it is an option of {}",
+                    users.join(", ")
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 pub fn run(o: &Options) -> Result<(), CliError> {
     // refuse before a long fit, not after it
     crate::files::refuse_existing(
@@ -268,9 +339,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         o.force,
     )?;
     let Some(kind) = &o.kind else {
+        refuse_other_class_options(o, "model")?;
         return super::fit_model::run(o);
     };
-    match kind.to_ascii_lowercase().as_str() {
+    let class = kind.to_ascii_lowercase();
+    if ["lti", "nlbench", "affine", "wiener"].contains(&class.as_str()) {
+        refuse_other_class_options(o, &class)?;
+    }
+    match class.as_str() {
         "lti" => {}
         "nlbench" => return super::fit_affine::run(o, true),
         "wiener" => return super::fit_wiener::run(o),

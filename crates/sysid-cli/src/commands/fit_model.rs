@@ -40,35 +40,8 @@ pub fn metadata_lines(summary: &serde_json::Value) -> Vec<(String, String)> {
     lines
 }
 
-/// The options of `fit` that have no meaning for a model file, if any was given.
-fn refuse_linear_options(o: &Options) -> Result<(), CliError> {
-    let given: [(&'static str, bool); 10] = [
-        ("--order", o.order.is_some()),
-        ("--fix", !o.fix.is_empty()),
-        ("--diag", !o.diag.is_empty()),
-        ("--system", o.system.is_some()),
-        ("--init", o.init != "n4sid"),
-        ("--offset", o.offset),
-        ("--estimate-initial", o.estimate_initial),
-        ("--stable", o.stable),
-        ("--full-r", o.full_r),
-        ("--split", o.split.is_some()),
-    ];
-    for (option, present) in given {
-        if present {
-            return Err(bad(
-                option,
-                "does not apply to a model file (its parameters start at their values in \
-                 the file; fixed = true holds one)",
-            ));
-        }
-    }
-    Ok(())
-}
-
 /// `sysid fit --model m.toml`.
 pub fn run(o: &Options) -> Result<(), CliError> {
-    refuse_linear_options(o)?;
     let path = o
         .model
         .as_deref()

@@ -124,6 +124,7 @@ fn a_linear_model_file_gives_the_kalman_loglik_through_the_particle_filter() {
     let mean = runs.iter().sum::<f64>() / count as f64;
     let var = runs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (count - 1) as f64;
     let se = (var / count as f64).sqrt();
+    eprintln!("pf {mean} (sd {}, se {se}) vs Kalman {exact}", var.sqrt());
     assert!(
         (mean - exact).abs() < 4.0 * se + var / 2.0 + 1e-3,
         "pf {mean} (sd {}) vs Kalman {exact}",
@@ -133,9 +134,9 @@ fn a_linear_model_file_gives_the_kalman_loglik_through_the_particle_filter() {
     assert!(var.sqrt() < 1.0, "sd {}", var.sqrt());
 }
 
-/// Particle EM on the lgss model file (affine in phi; q and r free; c fixed at 1), M =
-/// 500, started away from the answer, reaches exact EM's estimate: the mean of the
-/// last 30 of 80 iterates within a tolerance a few times their Monte Carlo spread.
+/// Particle EM on the lgss model file (affine in phi; q and r free; c fixed at 1),
+/// started away from the answer, reaches exact EM's estimate up to the particle
+/// E-step's O(1/M) bias: within 10 % at M = 500, within 3 % at M = 2000.
 #[test]
 fn particle_em_on_a_linear_model_file_reaches_exact_em() {
     let (truth, y) = lgss_data(500, 11);
@@ -168,12 +169,6 @@ fn particle_em_on_a_linear_model_file_reaches_exact_em() {
     let file = builtin::model("lgss").unwrap().unwrap();
     let affine = file.affine().expect("lgss is affine in phi");
     let series = Series::new(&y, 1).unwrap();
-    let smoother = FfbsiReject {
-        paths: 500,
-        max_trials: None,
-        parallel: false,
-    };
-    let mut em = AffineEm::new(&affine, series, 500, smoother, affine.em_spec(), 4).unwrap();
     struct Trace<'a>(&'a sysid_modelfile::ExprAffine, Vec<Vec<f64>>);
     impl sysid_em::EmObserver<sysid_em::affine::AffineParams> for Trace<'_> {
         fn iteration(
@@ -183,34 +178,53 @@ fn particle_em_on_a_linear_model_file_reaches_exact_em() {
             self.1.push(self.0.theta(info.estimate));
         }
     }
-    let mut observer = Trace(&affine, Vec::new());
-    let start = affine.params(&[0.5, 0.5, 1.0]).unwrap();
-    let run = sysid_em::run_em(
-        &mut em,
-        start,
-        &EmOptions {
+    // the mean of the last 30 of 80 iterates, with M particles and M smoothed paths
+    let particle_em = |particles: usize| -> Vec<f64> {
+        let smoother = FfbsiReject {
+            paths: particles,
+            max_trials: None,
+            parallel: false,
+        };
+        let mut em =
+            AffineEm::new(&affine, series, particles, smoother, affine.em_spec(), 4).unwrap();
+        let mut observer = Trace(&affine, Vec::new());
+        let start = affine.params(&[0.5, 0.5, 1.0]).unwrap();
+        let options = EmOptions {
             max_iterations: 80,
             tol: 0.0,
             ..EmOptions::default()
         }
         .check()
-        .unwrap(),
-        &mut observer,
-    );
-    assert!(!matches!(
-        run.termination,
-        sysid_em::Termination::Error { .. }
-    ));
-    let trace = observer.1;
-    let tail = &trace[trace.len() - 30..];
+        .unwrap();
+        let run = sysid_em::run_em(&mut em, start, &options, &mut observer);
+        assert!(!matches!(
+            run.termination,
+            sysid_em::Termination::Error { .. }
+        ));
+        let tail = &observer.1[observer.1.len() - 30..];
+        (0..3)
+            .map(|k| tail.iter().map(|t| t[k]).sum::<f64>() / 30.0)
+            .collect()
+    };
+    // The particle E-step's bias shrinks as 1/M: measured phi +0.5 %, q -4.6 %,
+    // r +6.6 % at M = 500 (300 iterations give the same means: a bias, not slow
+    // convergence) and +0.2 %, -1.5 %, +1.8 % at M = 2000 (-0.8 %, +1.0 % after 120
+    // iterations), along the q-r ridge where the likelihood is flat.
+    let (m500, m2000) = (particle_em(500), particle_em(2000));
     for (k, name) in ["phi", "q", "r"].iter().enumerate() {
-        let values: Vec<f64> = tail.iter().map(|t| t[k]).collect();
-        let mean = values.iter().sum::<f64>() / 30.0;
-        let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 29.0).sqrt();
+        let (e500, e2000) = (
+            (m500[k] / exact[k] - 1.0).abs(),
+            (m2000[k] / exact[k] - 1.0).abs(),
+        );
+        eprintln!(
+            "{name}: exact EM {} particle EM M=500 {} M=2000 {}",
+            exact[k], m500[k], m2000[k]
+        );
+        assert!(e500 < 0.1, "{name}: M = 500 off by {e500}");
+        assert!(e2000 < 0.03, "{name}: M = 2000 off by {e2000}");
         assert!(
-            (mean - exact[k]).abs() < 0.03 * exact[k].abs() + 4.0 * sd,
-            "{name}: particle EM {mean} (sd {sd}) vs exact EM {}",
-            exact[k]
+            e2000 <= e500 + 0.002,
+            "{name}: no closer with more particles"
         );
     }
 }

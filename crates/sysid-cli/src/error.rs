@@ -105,6 +105,14 @@ pub enum CliError {
     /// message).
     #[error("{0}")]
     ModelFile(#[from] sysid::modelfile::ModelFileError),
+    /// Ctrl-C stopped a run; what it had was written.
+    #[error("interrupted (Ctrl-C) after iteration {iteration}: wrote the result so far ({})", written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "))]
+    Interrupted {
+        /// The last iteration completed.
+        iteration: usize,
+        /// The files written.
+        written: Vec<PathBuf>,
+    },
     #[error("unknown system {name:?} (known: {known})")]
     UnknownSystem { name: String, known: String },
     #[error("{option}: {message}")]
@@ -160,11 +168,16 @@ pub enum CliError {
 pub const EXIT_BAD_INPUT: u8 = 2;
 /// Exit code of a failure while running (I/O, numerical breakdown): 1.
 pub const EXIT_FAILURE: u8 = 1;
+/// Exit code after Ctrl-C (128 + SIGINT), with the result so far written.
+pub const EXIT_INTERRUPTED: u8 = 130;
 
 impl CliError {
     /// [`EXIT_BAD_INPUT`] when the user's data, model file or options are at fault,
     /// else [`EXIT_FAILURE`].
     pub fn exit_code(&self) -> u8 {
+        if matches!(self, CliError::Interrupted { .. }) {
+            return EXIT_INTERRUPTED;
+        }
         use sysid::em::affine::AffineEmError;
         use sysid::em::linear::LinearEmError;
         use sysid::smc::SmcError;

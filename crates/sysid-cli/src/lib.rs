@@ -359,6 +359,7 @@ pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode
         Err(e) => return command_line_error(&e),
     };
     let strict = cli.strict;
+    progress::watch_interrupts();
     WARNINGS.store(0, std::sync::atomic::Ordering::Relaxed);
     let result = run(cli);
     let warnings = WARNINGS.load(std::sync::atomic::Ordering::Relaxed);

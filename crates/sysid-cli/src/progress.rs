@@ -9,6 +9,39 @@ use sysid::em::{EmObserver, IterationInfo};
 
 static QUIET: AtomicBool = AtomicBool::new(false);
 
+/// Set by the first Ctrl-C during a run that can stop and keep what it has.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+/// Whether the running command stops cleanly on Ctrl-C ([`interruptible`]).
+static INTERRUPTIBLE: AtomicBool = AtomicBool::new(false);
+
+/// Installs the Ctrl-C handler (once per process). During a run marked
+/// [`interruptible`] (EM, PMMH, particle Gibbs), the first Ctrl-C asks it to stop after
+/// the current iteration and write what it has; otherwise, or at a second Ctrl-C,
+/// the process exits at once with 130 (no output is left half-written: outputs are
+/// moved into place only when complete).
+pub fn watch_interrupts() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = ctrlc::set_handler(|| {
+            if !INTERRUPTIBLE.load(Ordering::SeqCst) || INTERRUPTED.swap(true, Ordering::SeqCst)
+            {
+                std::process::exit(130);
+            }
+            eprintln!("\nsysid: stopping after this iteration and keeping the result so far (Ctrl-C again to quit now)");
+        });
+    });
+}
+
+/// Marks the running command as one that stops cleanly on Ctrl-C.
+pub fn interruptible() {
+    INTERRUPTIBLE.store(true, Ordering::SeqCst);
+}
+
+/// Whether Ctrl-C asked the run to stop.
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
 /// Sets the global `--quiet`.
 pub fn set_quiet(quiet: bool) {
     QUIET.store(quiet, Ordering::Relaxed);
@@ -74,11 +107,19 @@ impl<T> EmObserver<T> for Progress {
             self.message(format!("loglik {:.3}", info.loglik));
         }
     }
+
+    fn should_stop(&self) -> bool {
+        interrupted()
+    }
 }
 
 impl sysid::pmcmc::ChainObserver for Progress {
     fn iteration(&self, _chain: usize, _iteration: usize) {
         self.inc(1);
+    }
+
+    fn should_stop(&self) -> bool {
+        interrupted()
     }
 }
 

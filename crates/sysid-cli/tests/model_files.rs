@@ -290,3 +290,96 @@ fn fit_refuses_the_options_of_other_model_classes() {
         assert!(!out_file.exists());
     }
 }
+
+/// Ctrl-C (SIGINT) during a long fit or chain: the result so far is written, marked
+/// as interrupted, and the exit code is 130; a command that cannot keep a partial
+/// result stops at once and leaves no output.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_keeps_what_a_long_run_has() {
+    use std::process::{Command, Stdio};
+    let dir = scratch_dir();
+    let data = dir.join("nl.csv");
+    ok(&["simulate", "nlbench", "--steps", "200", "--out", s(&data)]);
+    let model = dir.join("nlbench.toml");
+    std::fs::write(&model, sysid::modelfile::builtin::text("nlbench").unwrap()).unwrap();
+    let interrupt = |args: &[&str]| {
+        let child = Command::new(env!("CARGO_BIN_EXE_sysid"))
+            .args(args)
+            .stderr(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(1500));
+        let sent = Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+        child.wait_with_output().unwrap()
+    };
+    let fitted = dir.join("fit.toml");
+    let out = interrupt(&[
+        "fit",
+        "--model",
+        s(&model),
+        "--data",
+        s(&data),
+        "--method",
+        "em",
+        "--max-iter",
+        "10000000",
+        "--particles",
+        "20",
+        "--out",
+        s(&fitted),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(
+        stderr.contains("interrupted (Ctrl-C) after iteration"),
+        "{stderr}"
+    );
+    let text = std::fs::read_to_string(&fitted).unwrap();
+    assert!(text.contains("interrupted = true"), "{text}");
+    assert!(sysid::modelfile::ModelFile::parse(&text, "fit.toml").is_ok());
+
+    let chains = dir.join("chains.csv");
+    let out = interrupt(&[
+        "pmmh",
+        "--model",
+        s(&model),
+        "--data",
+        s(&data),
+        "--iters",
+        "1000000",
+        "--chains",
+        "2",
+        "--particles",
+        "20",
+        "--out",
+        s(&chains),
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(std::fs::read_to_string(&chains).unwrap().lines().count() > 10);
+
+    let states = dir.join("states.csv");
+    let out = interrupt(&[
+        "pf",
+        "--system",
+        "nlbench",
+        "--data",
+        s(&data),
+        "--particles",
+        "2000000",
+        "--out",
+        s(&states),
+    ]);
+    assert_eq!(out.status.code(), Some(130));
+    assert!(!states.exists());
+}

@@ -92,6 +92,12 @@ pub enum Termination<E> {
         /// Log-likelihood after.
         current: f64,
     },
+    /// The observer asked the run to stop ([`EmObserver::should_stop`], e.g. on
+    /// Ctrl-C): the estimate is the last one with a known log-likelihood.
+    Interrupted {
+        /// The last iteration completed.
+        iteration: usize,
+    },
     /// A step failed; the estimate is the last one that succeeded.
     Error {
         /// Iteration that failed (1-based).
@@ -246,6 +252,11 @@ pub trait EmObserver<T> {
     /// Called once when the run ends (converged, at the limit, or stopped by an
     /// error), with the returned estimate, its log-likelihood and the iterations made.
     fn finish(&mut self, _estimate: &T, _loglik: Option<f64>, _iterations: usize) {}
+    /// Asked after every iteration: `true` ends the run with
+    /// [`Termination::Interrupted`] (a user's Ctrl-C, a time budget). Default: never.
+    fn should_stop(&self) -> bool {
+        false
+    }
 }
 
 /// The observer that does nothing.
@@ -262,6 +273,9 @@ impl<T, O: EmObserver<T> + ?Sized> EmObserver<T> for &mut O {
     fn finish(&mut self, estimate: &T, loglik: Option<f64>, iterations: usize) {
         (**self).finish(estimate, loglik, iterations);
     }
+    fn should_stop(&self) -> bool {
+        (**self).should_stop()
+    }
 }
 
 /// Two observers, called in order (e.g. a trace and a progress bar).
@@ -277,6 +291,9 @@ impl<T, A: EmObserver<T>, B: EmObserver<T>> EmObserver<T> for (A, B) {
     fn finish(&mut self, estimate: &T, loglik: Option<f64>, iterations: usize) {
         self.0.finish(estimate, loglik, iterations);
         self.1.finish(estimate, loglik, iterations);
+    }
+    fn should_stop(&self) -> bool {
+        self.0.should_stop() || self.1.should_stop()
     }
 }
 
@@ -444,6 +461,20 @@ fn iterate<A: EmAlgorithm>(
             estimate: &next,
             elapsed: start.elapsed(),
         });
+        if observer.should_stop() {
+            // theta_{k-1}, whose log-likelihood this iteration computed
+            let termination = Termination::Interrupted {
+                iteration: iteration - 1,
+            };
+            return result(
+                current,
+                Some(l_current),
+                trace,
+                iteration - 1,
+                termination,
+                decreases,
+            );
+        }
         previous = Some(std::mem::replace(&mut current, next));
     }
     // the iteration limit: evaluate the last estimate

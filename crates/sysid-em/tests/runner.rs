@@ -221,3 +221,27 @@ fn observers_hear_the_start_and_the_finish() {
     );
     assert_eq!((r.estimate, r.iterations), (2, 2));
 }
+
+/// An observer that asks to stop ends the run with `Interrupted` and the last estimate
+/// whose log-likelihood is known.
+#[test]
+fn an_observer_can_stop_the_run() {
+    struct StopAfter(usize, usize);
+    impl EmObserver<usize> for StopAfter {
+        fn iteration(&mut self, _info: &IterationInfo<'_, usize>) {
+            self.1 += 1;
+        }
+        fn should_stop(&self) -> bool {
+            self.1 >= self.0
+        }
+    }
+    let mut alg = Scripted {
+        lik: vec![-5.0, -4.0, -3.0, -2.0, -1.0],
+        fail_at: None,
+        exact: true,
+    };
+    let r = run_em(&mut alg, 0, &options(50, 0.0), &mut StopAfter(3, 0));
+    assert_eq!(r.termination, Termination::Interrupted { iteration: 2 });
+    // theta_2 with l(theta_2) = -3
+    assert_eq!((r.estimate, r.loglik, r.iterations), (2, Some(-3.0), 2));
+}

@@ -23,6 +23,10 @@ pub struct Chain {
     /// Particle Gibbs only: the posterior mean of each state `x_t` (time-major
     /// `T x n`) over the post-burn-in iterations.
     pub state_mean: Option<Vec<f64>>,
+    /// The chain was stopped before its iterations were done
+    /// ([`ChainObserver::should_stop`](crate::ChainObserver::should_stop)); its draws are
+    /// those made until then.
+    pub interrupted: bool,
 }
 
 impl Chain {

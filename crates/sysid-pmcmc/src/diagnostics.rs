@@ -109,7 +109,8 @@ pub struct ParameterSummary {
     pub q95: f64,
 }
 
-/// Summaries of every parameter of `chains` (which share names and burn-in).
+/// Summaries of every parameter of `chains` (which share names and burn-in); NaN
+/// where the chains have no draws after the burn-in (stopped early).
 pub fn summarise(chains: &[Chain]) -> Vec<ParameterSummary> {
     let Some(first) = chains.first() else {
         return Vec::new();
@@ -126,6 +127,10 @@ pub fn summarise(chains: &[Chain]) -> Vec<ParameterSummary> {
             let ess: f64 = draws.iter().map(|d| effective_sample_size(d)).sum();
             pooled.sort_by(f64::total_cmp);
             let quantile = |p: f64| {
+                // no draws (a chain stopped during its burn-in): nothing to report
+                if pooled.is_empty() {
+                    return f64::NAN;
+                }
                 let position = p * (count - 1.0);
                 let (lo, frac) = (position.floor() as usize, position.fract());
                 let hi = (lo + 1).min(pooled.len() - 1);
@@ -163,6 +168,24 @@ mod tests {
                 x
             })
             .collect()
+    }
+
+    /// A chain stopped during its burn-in has no draws to summarise: NaN, not a panic.
+    #[test]
+    fn summaries_of_chains_without_draws_are_nan() {
+        let chain = Chain {
+            names: vec!["a".into()],
+            burn_in: 10,
+            samples: vec![0.5; 3],
+            log_likelihood: vec![-1.0; 3],
+            log_prior: vec![0.0; 3],
+            accepted: vec![true; 3],
+            state_update_rate: None,
+            state_mean: None,
+            interrupted: true,
+        };
+        let s = summarise(&[chain.clone(), chain]);
+        assert!(s[0].mean.is_nan() && s[0].q05.is_nan() && s[0].q95.is_nan());
     }
 
     #[test]

@@ -344,8 +344,13 @@ fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
         }
         out.push(&theta, result.loglik, prior.log_density(&theta), accepted);
         observer.iteration(chain, iteration);
+        if observer.should_stop() && iteration + 1 < options.iterations {
+            out.interrupt();
+            break;
+        }
     }
-    let kept = (options.iterations - options.burn_in) as f64;
+    // the post-burn-in iterations actually made (fewer when interrupted)
+    let kept = out.len().saturating_sub(options.burn_in).max(1) as f64;
     let mut result = out.finish();
     result.state_update_rate = Some(changes.iter().map(|&c| c as f64 / kept).collect());
     result.state_mean = Some(state_sum.iter().map(|s| s / kept).collect());

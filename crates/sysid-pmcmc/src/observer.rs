@@ -23,6 +23,13 @@ pub trait ChainObserver: Sync {
     fn iteration(&self, chain: usize, iteration: usize) {
         let _ = (chain, iteration);
     }
+
+    /// Asked after every iteration of every chain: `true` ends the chains where they
+    /// are (a user's Ctrl-C); each is returned with the draws made so far and marked
+    /// [`Chain::interrupted`](crate::Chain::interrupted). Default: never.
+    fn should_stop(&self) -> bool {
+        false
+    }
 }
 
 impl ChainObserver for () {}

@@ -306,6 +306,10 @@ fn run_chain<F: ModelFamily, P: Prior>(
             visited.extend_from_slice(&current.z);
         }
         observer.iteration(chain, iteration);
+        if observer.should_stop() && iteration + 1 < options.iterations {
+            out.interrupt();
+            break;
+        }
     }
     Ok(out.finish())
 }
@@ -385,6 +389,7 @@ impl ChainRecorder {
                 accepted: Vec::with_capacity(iterations),
                 state_update_rate: None,
                 state_mean: None,
+                interrupted: false,
             },
         }
     }
@@ -400,6 +405,16 @@ impl ChainRecorder {
         self.chain.log_likelihood.push(log_likelihood);
         self.chain.log_prior.push(log_prior);
         self.chain.accepted.push(accepted);
+    }
+
+    /// Marks the chain as stopped early.
+    pub(crate) fn interrupt(&mut self) {
+        self.chain.interrupted = true;
+    }
+
+    /// Iterations recorded so far.
+    pub(crate) fn len(&self) -> usize {
+        self.chain.accepted.len()
     }
 
     pub(crate) fn finish(self) -> Chain {

@@ -434,6 +434,7 @@ where
     };
     let progress =
         crate::progress::Progress::new(job.options.max_iterations as u64, method, o.json);
+    crate::progress::interruptible();
     let result = run_em(
         &mut em,
         start,
@@ -446,10 +447,11 @@ where
             "{context}, EM iteration {iteration}"
         ))(error.clone()));
     }
+    let stopped = matches!(result.termination, Termination::Interrupted { .. });
     let summary = serde_json::json!({
         "iterations": result.iterations, "particles": o.particles, "method": method,
         "seed": o.seed, "loglik_estimate": result.loglik,
-        "likelihood_decreases": result.decreases,
+        "likelihood_decreases": result.decreases, "interrupted": stopped,
     });
     let text = model.model_text(&result.estimate, &summary)?;
     write_output(&o.out, o.force, &text)?;
@@ -480,7 +482,10 @@ where
             )
         },
     );
-    Ok(())
+    super::interrupted(
+        &result.termination,
+        std::iter::once(o.out.clone()).chain(o.trace.clone()),
+    )
 }
 
 /// `--method robust`: [`fit_robust`] with the command's smoother, starts, refinement

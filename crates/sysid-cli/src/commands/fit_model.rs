@@ -136,6 +136,7 @@ fn fit_gradient(
         rows: Vec::new(),
     };
     let progress = crate::progress::Progress::new(o.max_iter as u64, "gradient EM", o.json);
+    crate::progress::interruptible();
     let result = run_em(
         &mut em,
         start,
@@ -156,6 +157,7 @@ fn fit_gradient(
         "method": method, "iterations": result.iterations, "particles": o.particles,
         "seed": o.seed, "loglik_estimate": result.loglik,
         "likelihood_decreases": result.decreases, "data": context,
+        "interrupted": matches!(result.termination, Termination::Interrupted { .. }),
     });
     let fitted = model.with_values(&estimate);
     let mut outputs = vec![(o.out.clone(), fitted.to_toml(&metadata_lines(&summary)))];
@@ -203,7 +205,10 @@ fn fit_gradient(
             o.out.display()
         )
     });
-    Ok(())
+    super::interrupted(
+        &result.termination,
+        outputs.into_iter().map(|(path, _)| path),
+    )
 }
 
 /// A warning per parameter still drifting: over the last quarter of the iterations, its

@@ -99,6 +99,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     })?;
     let progress =
         crate::progress::Progress::new(options.max_iterations as u64, "fit wiener", o.json);
+    crate::progress::interruptible();
     let result = run_em(
         &mut em,
         theta,
@@ -133,6 +134,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         "r": numbers(&e.r),
         "gradient_em": {"iterations": result.iterations, "particles": o.particles,
             "seed": o.seed, "loglik_estimate": result.loglik,
+            "interrupted": matches!(result.termination, Termination::Interrupted { .. }),
             "normalised_magnitude_error_vs_reference_system": normalised_magnitude_error(&e)},
     });
     write_output(
@@ -167,5 +169,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             )
         },
     );
-    Ok(())
+    super::interrupted(
+        &result.termination,
+        std::iter::once(o.out.clone()).chain(o.trace.clone()),
+    )
 }

@@ -246,3 +246,18 @@ pub fn in_data(data: &Path) -> impl Fn(sysid::kalman::KalmanError) -> CliError +
         source,
     }
 }
+
+/// After a run's outputs are written: Ctrl-C's error (exit 130, naming what was
+/// written) when it stopped the run, else `Ok`.
+pub fn interrupted<E>(
+    termination: &sysid::em::Termination<E>,
+    written: impl IntoIterator<Item = std::path::PathBuf>,
+) -> Result<(), CliError> {
+    match termination {
+        sysid::em::Termination::Interrupted { iteration } => Err(CliError::Interrupted {
+            iteration: *iteration,
+            written: written.into_iter().collect(),
+        }),
+        _ => Ok(()),
+    }
+}

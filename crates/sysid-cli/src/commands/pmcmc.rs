@@ -580,6 +580,7 @@ fn sample_and_report<F: ModelFamily>(
     let started = std::time::Instant::now();
     let progress =
         crate::progress::Progress::new((c.chains * c.iterations) as u64, command, c.json);
+    crate::progress::interruptible();
     let chains = sample(&series, &start, burn_in, &progress).map_err(pmcmc_error(&context))?;
     progress.finish();
     finish(
@@ -588,7 +589,16 @@ fn sample_and_report<F: ModelFamily>(
         particles,
         &chains,
         started.elapsed().as_secs_f64(),
-    )
+    )?;
+    if chains.iter().any(|chain| chain.interrupted) {
+        // every chain stopped at Ctrl-C; they were written as far as they went
+        let done = chains.iter().map(Chain::iterations).min().unwrap_or(0);
+        return Err(CliError::Interrupted {
+            iteration: done,
+            written: c.out.iter().cloned().collect(),
+        });
+    }
+    Ok(())
 }
 
 /// Writes the draws and prints the summary.
@@ -622,6 +632,7 @@ fn finish(
             "command": command, "system": a.label(), "chains": chains.len(),
             "iterations": a.iterations, "burn_in": chains[0].burn_in, "particles": particles,
             "seed": a.seed, "acceptance": acceptance, "summary": summary,
+            "interrupted": chains.iter().any(|c| c.interrupted),
             "min_state_update_rate": min_update_rate, "warnings": warnings,
             "seconds": seconds, "ms_per_iteration": 1e3 * seconds * crate::threads().min(chains.len()) as f64 / iterations,
             "out": a.out,

@@ -78,6 +78,22 @@ impl Progress {
         Progress { bar: Some(bar) }
     }
 
+    /// A spinner labelled `label`, for one long computation without steps (shown on
+    /// a terminal only, as [`new`](Self::new)).
+    pub fn spinner(label: &str, json: bool) -> Progress {
+        if json || quiet() || !std::io::stderr().is_terminal() {
+            return Progress { bar: None };
+        }
+        let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr())
+            .with_finish(ProgressFinish::AndClear);
+        if let Ok(style) = ProgressStyle::with_template("{prefix:>12} {spinner} {elapsed}") {
+            bar.set_style(style);
+        }
+        bar.set_prefix(label.to_string());
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        Progress { bar: Some(bar) }
+    }
+
     /// Advances by `n` steps.
     pub fn inc(&self, n: u64) {
         if let Some(bar) = &self.bar {

@@ -81,7 +81,8 @@ impl FilterTrust {
 
 /// Diagnoses the run of `pf` (log-likelihood `loglik`): its ESS, and `args.repeats`
 /// more filters with the same options on streams derived from `args.seed`. `time`
-/// names the steps in the messages (the data file's time; row numbers without one).
+/// names the steps in the messages (the data file's time; row numbers without one);
+/// `progress` advances by one per repeat.
 pub(crate) fn diagnose<M: FilterModel + Sync>(
     model: &M,
     series: &Series<'_>,
@@ -89,6 +90,7 @@ pub(crate) fn diagnose<M: FilterModel + Sync>(
     loglik: f64,
     args: &ParticleArgs,
     time: &[f64],
+    progress: &crate::progress::Progress,
 ) -> FilterTrust {
     let (options, ess, seed, repeats) = (pf.options(), pf.ess(), args.seed, args.repeats);
     let time_label = |t: usize| time.get(t).map_or_else(|| (t + 1).to_string(), |v| fmt(*v));
@@ -121,7 +123,9 @@ pub(crate) fn diagnose<M: FilterModel + Sync>(
             Ok(mut filter) => {
                 for k in 1..=repeats as u64 {
                     let repeat_seed: u64 = rand::RngExt::random(&mut stream(seed, k));
-                    match filter.run(model, series, repeat_seed) {
+                    let run = filter.run(model, series, repeat_seed);
+                    progress.inc(1);
+                    match run {
                         Ok(s) => estimates.push(s.loglik),
                         Err(e) => {
                             warnings.push(format!(

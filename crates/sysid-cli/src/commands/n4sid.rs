@@ -159,7 +159,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let mut file = o.data.read()?;
     file.require_outputs(&o.data.data)?;
     let trend = super::detrend::apply(&mut file, super::detrend::parse(&o.detrend)?)?;
-    let result = n4sid(&file.record, &options)?;
+    let spinner = crate::progress::Progress::spinner("n4sid", o.json);
+    let result = n4sid(&file.record, &options);
+    spinner.finish();
+    let result = result?;
     let described = super::detrend::written_model(&result.model, trend.as_ref())?;
     let mut spec = ModelSpec::from_model(&described);
     let chosen = result.order_scores.iter().find(|s| s.order == result.order);

@@ -289,10 +289,15 @@ fn filter_with<M: FilterModel + Sync>(
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(option_error)?;
     let start = std::time::Instant::now();
+    // one step per filter run: the run, then its repeats
+    let progress = crate::progress::Progress::new(a.repeats as u64 + 1, "pf", a.json);
     let run = pf
         .run(model, &series, a.seed)
         .map_err(smc_error(&context))?;
-    let trust = super::filter_trust::diagnose(model, &series, &pf, run.loglik, a, &file.time);
+    progress.inc(1);
+    let trust =
+        super::filter_trust::diagnose(model, &series, &pf, run.loglik, a, &file.time, &progress);
+    progress.finish();
     let seconds = start.elapsed().as_secs_f64();
     write_states(a, &file.time, model.state_dim(), pf.means(), None)?;
     if a.json {
@@ -386,10 +391,13 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     let mut pf = ParticleFilter::new(options).map_err(option_error)?;
     let parallel = crate::threads() > 1;
     let start = std::time::Instant::now();
+    // the filter, the smoother, then the filter's repeats
+    let progress = crate::progress::Progress::new(c.repeats as u64 + 2, "psmooth", c.json);
     let (run, (paths, stats)) = (|| {
         let run = pf
             .run(model, &series, c.seed)
             .map_err(smc_error(&context))?;
+        progress.inc(1);
         let history = pf.history().expect("history stored");
         let seed = c.seed.wrapping_add(1);
         let smoothed = match a.method.as_str() {
@@ -420,7 +428,10 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     })()?;
     // the smoothed paths are drawn from the filter's particles: a filter that lost the
     // state smooths the wrong trajectory there
-    let trust = super::filter_trust::diagnose(model, &series, &pf, run.loglik, c, &file.time);
+    progress.inc(1);
+    let trust =
+        super::filter_trust::diagnose(model, &series, &pf, run.loglik, c, &file.time, &progress);
+    progress.finish();
     let seconds = start.elapsed().as_secs_f64();
     let (means, sds) = (paths.means(), paths.std_devs());
     write_states(c, &file.time, model.state_dim(), &means, Some(&sds))?;

@@ -223,25 +223,13 @@ impl GradientModel for ExprGradient {
         let Some(p) = p else {
             return f64::NEG_INFINITY;
         };
-        let eval = |e: &Expr| p.model.eval(e, t, u, x);
-        let variances = p.model.process_variances();
         let d = &self.derivatives;
-        let mut value = 0.0;
-        for (i, f) in self.file.spec().transition.iter().enumerate() {
-            let (m, v) = (eval(f), variances[i]);
-            value += log_normal(next[i], m, v);
-            gaussian_gradient(
-                next[i],
-                m,
-                v,
-                &d.transition[i],
-                &d.process[i],
-                &eval,
-                &p.jacobian,
-                grad,
-            );
-        }
-        value
+        let rows = Rows {
+            means: &self.file.spec().transition,
+            mean_partials: &d.transition,
+            variance_partials: &d.process,
+        };
+        rows.log_density(p, (t, u, x), next, p.model.process_variances(), grad)
     }
 
     fn log_observation_gradient(
@@ -256,22 +244,49 @@ impl GradientModel for ExprGradient {
         let Some(p) = p else {
             return f64::NEG_INFINITY;
         };
-        let eval = |e: &Expr| p.model.eval(e, t, u, x);
-        let variances = p.model.measurement_variances();
         let d = &self.derivatives;
+        let rows = Rows {
+            means: &self.file.spec().observation,
+            mean_partials: &d.observation,
+            variance_partials: &d.measurement,
+        };
+        rows.log_density(p, (t, u, x), y, p.model.measurement_variances(), grad)
+    }
+}
+
+/// Independent Gaussian rows `z_i ~ N(m_i(x, u, t), v_i)`: the transition's or the
+/// observation's, with the partials of their means and variances.
+struct Rows<'a> {
+    means: &'a [Expr],
+    mean_partials: &'a [Partials],
+    variance_partials: &'a [Partials],
+}
+
+impl Rows<'_> {
+    /// `sum_i log N(z_i; m_i, v_i)` over the rows whose `z_i` is observed (not NaN),
+    /// adding its gradient into `grad`.
+    fn log_density(
+        &self,
+        p: &Unpacked,
+        (t, u, x): (usize, &[f64], &[f64]),
+        z: &[f64],
+        variances: impl Iterator<Item = f64>,
+        grad: &mut [f64],
+    ) -> f64 {
+        let eval = |e: &Expr| p.model.eval(e, t, u, x);
         let mut value = 0.0;
-        for (j, g) in self.file.spec().observation.iter().enumerate() {
-            if y[j].is_nan() {
+        for (i, (mean, v)) in self.means.iter().zip(variances).enumerate() {
+            if z[i].is_nan() {
                 continue;
             }
-            let (m, v) = (eval(g), variances[j]);
-            value += log_normal(y[j], m, v);
+            let m = eval(mean);
+            value += log_normal(z[i], m, v);
             gaussian_gradient(
-                y[j],
+                z[i],
                 m,
                 v,
-                &d.observation[j],
-                &d.measurement[j],
+                &self.mean_partials[i],
+                &self.variance_partials[i],
                 &eval,
                 &p.jacobian,
                 grad,

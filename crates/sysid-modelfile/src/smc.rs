@@ -181,13 +181,13 @@ impl ExprSmc {
     }
 
     /// The process-noise variances.
-    pub(crate) fn process_variances(&self) -> Vec<f64> {
-        self.process.iter().map(|v| v.var).collect()
+    pub(crate) fn process_variances(&self) -> impl Iterator<Item = f64> + '_ {
+        self.process.iter().map(|v| v.var)
     }
 
     /// The measurement-noise variances.
-    pub(crate) fn measurement_variances(&self) -> Vec<f64> {
-        self.measurement.iter().map(|v| v.var).collect()
+    pub(crate) fn measurement_variances(&self) -> impl Iterator<Item = f64> + '_ {
+        self.measurement.iter().map(|v| v.var)
     }
 
     /// The initial means and variances.

@@ -6,7 +6,7 @@ use std::path::Path;
 /// Parses `bytes` as a data file (CSV, default columns) into a record.
 pub fn parse_data_file(bytes: &[u8]) -> Result<(), String> {
     crate::files::parse_data(
-        bytes,
+        std::io::Cursor::new(bytes.to_vec()),
         Path::new("fuzz.csv"),
         &crate::files::ColumnChoice::default(),
     )
@@ -17,7 +17,8 @@ pub fn parse_data_file(bytes: &[u8]) -> Result<(), String> {
 /// Parses `bytes` as a numeric table (what `sysid plot` reads).
 pub fn parse_table(bytes: &[u8]) -> Result<(), String> {
     let (header, rows) =
-        crate::files::parse_rows(bytes, Path::new("fuzz.csv")).map_err(|e| e.to_string())?;
+        crate::files::parse_rows(std::io::Cursor::new(bytes.to_vec()), Path::new("fuzz.csv"))
+            .map_err(|e| e.to_string())?;
     for (_, row) in rows {
         debug_assert_eq!(row.len(), header.len());
     }

@@ -15,6 +15,7 @@
 //! replaced without `--force`.
 
 mod commands;
+mod data_file;
 mod error;
 mod files;
 pub mod fuzzing;

@@ -368,6 +368,61 @@ fn ctrl_c_keeps_what_a_long_run_has() {
     );
     assert!(std::fs::read_to_string(&chains).unwrap().lines().count() > 10);
 
+    // fit lti (plain EM, no tolerance to stop it) and robust particle EM keep their
+    // estimate too
+    let lti_data = dir.join("d.csv");
+    ok(&[
+        "simulate",
+        "lti2x2",
+        "--steps",
+        "300",
+        "--out",
+        s(&lti_data),
+    ]);
+    let lti = dir.join("lti.json");
+    let trace = dir.join("trace.csv");
+    let out = interrupt(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&lti_data),
+        "--order",
+        "8",
+        "--accelerate",
+        "none",
+        "--polish",
+        "off",
+        "--tol",
+        "0",
+        "--max-iter",
+        "100000000",
+        "--out",
+        s(&lti),
+        "--trace",
+        s(&trace),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    let text = std::fs::read_to_string(&lti).unwrap();
+    assert!(text.contains("\"termination\": \"interrupted\""), "{text}");
+    assert!(std::fs::read_to_string(&trace).unwrap().lines().count() > 10);
+    let robust = dir.join("robust.json");
+    let out = interrupt(&[
+        "fit",
+        "nlbench",
+        "--data",
+        s(&data),
+        "--max-iter",
+        "100000000",
+        "--out",
+        s(&robust),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted after"), "{stderr}");
+    let text = std::fs::read_to_string(&robust).unwrap();
+    assert!(text.contains("\"interrupted\": true"), "{text}");
+
     let states = dir.join("states.csv");
     let out = interrupt(&[
         "pf",

@@ -141,6 +141,13 @@ pub enum KalmanError {
         /// Time step (1-based) at which it overflowed.
         time: usize,
     },
+    /// Smoothing by blocks asked of a model with a diffuse initial state (its
+    /// smoothed states depend on the diffuse part's posterior given the whole record).
+    #[error(
+        "a model with a diffuse initial state is smoothed over the whole record, not by \
+         blocks; give it a proper initial law (e.g. `--initial stationary`) for a long record"
+    )]
+    DiffuseInBlocks,
     /// A data set with no record, or a record of length zero.
     #[error("record {record} has no time steps")]
     EmptyRecord {
@@ -157,6 +164,22 @@ pub enum KalmanError {
         /// Time steps of the outputs.
         output_steps: usize,
     },
+}
+
+impl KalmanError {
+    /// The error of a block that starts after `steps` steps of a longer record, with its
+    /// time counted from the start of the record.
+    pub(crate) fn at_offset(self, steps: usize) -> Self {
+        let mut e = self;
+        match &mut e {
+            KalmanError::NonFiniteData { time, .. }
+            | KalmanError::SingularInnovation { time, .. }
+            | KalmanError::Overflow { time, .. }
+            | KalmanError::SimulationDiverges { time } => *time += steps,
+            _ => {}
+        }
+        e
+    }
 }
 
 /// Shorthand for results of this crate.

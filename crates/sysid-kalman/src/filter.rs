@@ -150,6 +150,12 @@ impl FilterOutput {
         Some((x, delta.undetermined))
     }
 
+    /// `Cov(delta | first steps)` over the determined directions (None without a
+    /// diffuse part).
+    pub(crate) fn partial_delta_covariance(&self, steps: usize) -> Option<DMatrix<f64>> {
+        self.partial_delta(steps).map(|d| d.covariance)
+    }
+
     /// `delta` given the first `steps` observations (None without a diffuse part).
     fn partial_delta(&self, steps: usize) -> Option<PartialPosterior> {
         let q = self.diffuse.q;

@@ -68,13 +68,7 @@ impl InitialState {
             return Ok(applied);
         }
         let n = model.n();
-        let radius = spectral_radius(model.a());
-        let memory = if radius > 0.0 {
-            (0.01_f64.ln() / radius.ln()).ceil().max(1.0) as usize
-        } else {
-            1
-        };
-        let early = memory.min(record.len());
+        let early = stationary_input_window(model).min(record.len());
         let mean_input = record.u.columns(0, early).column_mean();
         let forced = model.b() * mean_input;
         let mu = (DMatrix::identity(n, n) - model.a())
@@ -82,6 +76,18 @@ impl InitialState {
             .solve(&forced)
             .unwrap_or_else(|| DVector::zeros(n));
         applied.to_builder().mu(mu).build()
+    }
+}
+
+/// The steps of a record's first inputs that [`InitialState::Stationary`] averages
+/// (the system's memory: the steps after which `rho(A)^k < 0.01`); a record read in
+/// blocks gives its first block at least this many steps for the same `mu`.
+pub fn stationary_input_window(model: &LinearGaussianModel) -> usize {
+    let radius = spectral_radius(model.a());
+    if radius > 0.0 {
+        (0.01_f64.ln() / radius.ln()).ceil().max(1.0) as usize
+    } else {
+        1
     }
 }
 

@@ -130,6 +130,21 @@ impl LinearGaussianModel {
         initial_factor: DMatrix<f64>, "Factor `F` (n x n) with `F'F = P1`.";
     }
 
+    /// The same model started from `x_1 ~ N(mean, F'F)` (`factor` = `F`, column-major),
+    /// without diffuse directions (the state carried between the blocks of a long
+    /// record).
+    pub(crate) fn with_initial_factor(&self, mean: &[f64], factor: &[f64]) -> LinearGaussianModel {
+        let n = self.n();
+        let f = DMatrix::from_column_slice(n, n, factor);
+        let mut model = self.clone();
+        model.p1 = f.transpose() * &f;
+        sysid_linalg::symmetrize(&mut model.p1);
+        model.initial_factor = f;
+        model.mu = DVector::from_column_slice(mean);
+        model.diffuse = DMatrix::zeros(n, 0);
+        model
+    }
+
     /// The same model with `S = 0` (still valid: `Q` and `R` are PSD on their own).
     /// Linear EM holds `S` fixed, so a subspace estimate (which has an `S`) is usually
     /// started from this.

@@ -135,6 +135,26 @@ impl KalmanWorkspace {
             record,
             record_index,
             stats,
+            terminal: None,
+        })
+    }
+
+    /// Smooths one block of a longer record whose smoothed state after the block,
+    /// `x_{T+1|all}` and its covariance (column-major), is `terminal` (`None`: the
+    /// block ends the record). The moments are stored as by [`smooth`](Self::smooth).
+    pub(crate) fn smooth_record_from(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        terminal: Option<(&[f64], &[f64])>,
+    ) -> Result<f64> {
+        sysid_linalg::simd::dispatch(SmoothingPasses {
+            workspace: self,
+            model,
+            record,
+            record_index: 0,
+            stats: None,
+            terminal,
         })
     }
 
@@ -145,6 +165,7 @@ impl KalmanWorkspace {
         record: &Record,
         record_index: usize,
         stats: Option<&mut SufficientStatistics>,
+        terminal: Option<(&[f64], &[f64])>,
     ) -> Result<f64> {
         let loglik = self.run_body(model, record, record_index, Keep::SmootherInputs)?;
         let n = model.n();
@@ -168,8 +189,12 @@ impl KalmanWorkspace {
         // slots of P_{t|T}, P_{t+1|T} and M_t in the stored or rolling buffers
         let cov_slot = |t: usize| if keep_moments { t } else { t % 2 };
         let lag_slot = |t: usize| if keep_moments { t } else { 0 };
-        s.mean[t_len * n..].copy_from_slice(&f.pred_mean[t_len * n..]);
-        {
+        if let Some((mean, cov)) = terminal {
+            s.mean[t_len * n..].copy_from_slice(mean);
+            let slot = cov_slot(t_len);
+            s.cov[slot * nn..(slot + 1) * nn].copy_from_slice(cov);
+        } else {
+            s.mean[t_len * n..].copy_from_slice(&f.pred_mean[t_len * n..]);
             let u = &f.pred_factor[t_len * nn..];
             let slot = cov_slot(t_len);
             dense::mul_tn(
@@ -286,6 +311,7 @@ struct SmoothingPasses<'w, 'm, 'r, 's> {
     record: &'r Record,
     record_index: usize,
     stats: Option<&'s mut SufficientStatistics>,
+    terminal: Option<(&'s [f64], &'s [f64])>,
 }
 
 impl sysid_linalg::simd::Kernel for SmoothingPasses<'_, '_, '_, '_> {
@@ -293,8 +319,13 @@ impl sysid_linalg::simd::Kernel for SmoothingPasses<'_, '_, '_, '_> {
 
     #[inline(always)]
     fn run(self) -> Self::Output {
-        self.workspace
-            .smooth_record_body(self.model, self.record, self.record_index, self.stats)
+        self.workspace.smooth_record_body(
+            self.model,
+            self.record,
+            self.record_index,
+            self.stats,
+            self.terminal,
+        )
     }
 }
 
@@ -572,7 +603,7 @@ mod tests {
             let mut baseline = KalmanWorkspace::new();
             let ll_d = dispatched.smooth_record(&model, &record, 0, None).unwrap();
             let ll_b = baseline
-                .smooth_record_body(&model, &record, 0, None)
+                .smooth_record_body(&model, &record, 0, None, None)
                 .unwrap();
             assert_eq!(ll_d.to_bits(), ll_b.to_bits(), "n = {n}: log-likelihood");
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
@@ -590,7 +621,7 @@ mod tests {
                 .smooth_record(&model, &record, 0, Some(&mut stats_d))
                 .unwrap();
             baseline
-                .smooth_record_body(&model, &record, 0, Some(&mut stats_b))
+                .smooth_record_body(&model, &record, 0, Some(&mut stats_b), None)
                 .unwrap();
             assert_eq!(
                 bits(stats_d.second_moment().as_slice()),

@@ -199,14 +199,19 @@ impl Trend {
         self.at(&self.output_offsets, &self.output_slopes, time)
     }
 
+    /// Subtracts the trends from a record at the given times (one per step).
+    pub fn remove_from(&self, record: &mut sysid::kalman::Record, time: &[f64]) {
+        record.u -= self.inputs_at(time);
+        // an inputs-only record (a file to simulate) has no outputs to detrend
+        if record.y.nrows() == self.output_offsets.len() {
+            record.y -= self.outputs_at(time);
+        }
+    }
+
     /// Subtracts the trends from a record at its times; a linear trend is remembered
     /// by the file so that [`DataFile::restored`] can add it back.
     pub fn remove(&self, file: &mut DataFile) {
-        file.record.u -= self.inputs_at(&file.time);
-        // an inputs-only record (a file to simulate) has no outputs to detrend
-        if file.record.y.nrows() == self.output_offsets.len() {
-            file.record.y -= self.outputs_at(&file.time);
-        }
+        self.remove_from(&mut file.record, &file.time);
         if self.kind == Kind::Linear {
             file.trend = Some(self.clone());
         }

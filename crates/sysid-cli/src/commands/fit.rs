@@ -589,6 +589,11 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
     let start = apply(start, &mut spec, &fixes, &diagonal)?;
     let start = spec.project(&start)?;
     let mut progress = crate::progress::Progress::new(o.max_iter as u64, "fit lti", o.json);
+    if !probe {
+        // Ctrl-C stops EM after the iteration and writes the model so far (an order
+        // scan's probes stop at once)
+        crate::progress::interruptible();
+    }
     let started = std::time::Instant::now();
     let records = std::slice::from_ref(&file.record);
     let coordinates = coordinate_count(&start, &spec);
@@ -661,7 +666,9 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
     progress.finish();
     let mut result = result;
     let mut polish = None;
+    let stopped = matches!(result.termination, Termination::Interrupted { .. });
     if polish_on
+        && !stopped
         && result.loglik.is_some()
         && !matches!(result.termination, Termination::Error { .. })
     {
@@ -759,8 +766,8 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
                 && !(spec.a && spec.c && result.estimate.n() > 1)
         }
     };
-    let uncertainty =
-        want_errors.then(|| sysid::em::linear::standard_errors(&result.estimate, records, &spec));
+    let uncertainty = (want_errors && !stopped)
+        .then(|| sysid::em::linear::standard_errors(&result.estimate, records, &spec));
     let (parameters, table) =
         match &uncertainty {
             Some(Ok(u)) => {
@@ -950,6 +957,10 @@ fn fit_lti(o: &Options, mode: Mode) -> Result<Outcome, CliError> {
             decrease_diagnosis(&result.estimate, &file, &spec)
         )));
     }
+    super::interrupted(
+        &result.termination,
+        std::iter::once(o.out.clone()).chain(o.trace.clone()),
+    )?;
     Ok(outcome)
 }
 
@@ -992,6 +1003,7 @@ fn em_stop(termination: &Termination<sysid::em::linear::LinearEmError>) -> &'sta
         Termination::MaxIterations => "max_iterations",
         Termination::LikelihoodDecreased { .. } => "likelihood_decreased",
         Termination::Error { .. } => "error",
+        Termination::Interrupted { .. } => "interrupted",
         _ => "other",
     }
 }
@@ -1225,7 +1237,10 @@ mod tests {
             input_names: (1..=u.nrows()).map(|i| format!("u{i}")).collect(),
             output_names: (1..=y.nrows()).map(|i| format!("y{i}")).collect(),
             time: (0..y.ncols()).map(|t| t as f64).collect(),
-            labels: (0..y.ncols()).map(|t| t.to_string()).collect(),
+            labels: crate::data_file::Labels::Rows {
+                first: 0,
+                len: y.ncols(),
+            },
             sample_time: None,
             columns: Vec::new(),
             trend: None,

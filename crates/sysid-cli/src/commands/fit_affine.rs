@@ -18,7 +18,7 @@ use crate::files::{DataFile, read_model, write_output};
 use std::path::Path;
 use sysid::em::affine::{
     AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, Psaem, RobustOptions,
-    StartStatus, StepSizes, describe, fit_robust,
+    StartStatus, StepSizes, describe, fit_robust_until,
 };
 use sysid::em::linear::Covariance;
 use sysid::em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
@@ -518,8 +518,20 @@ where
     };
     let smoother = chosen_smoother(o)?;
     let began = std::time::Instant::now();
-    let fit = fit_robust(model, *series, &start, &spec, &smoother, &options, o.seed)
-        .map_err(affine_error(&context))?;
+    // Ctrl-C ends the exploration or the refinement where it is; the result so far is
+    // written, marked interrupted
+    crate::progress::interruptible();
+    let fit = fit_robust_until(
+        model,
+        *series,
+        &start,
+        &spec,
+        &smoother,
+        &options,
+        o.seed,
+        &crate::progress::interrupted,
+    )
+    .map_err(affine_error(&context))?;
     let seconds = began.elapsed().as_secs_f64();
     let names = model.names(&start);
     let named = |p: &AffineParams| -> serde_json::Value {
@@ -552,6 +564,7 @@ where
     };
     let summary = serde_json::json!({
         "method": "robust", "seed": o.seed, "smoother": o.smoother,
+        "interrupted": fit.interrupted,
         "loglik": fit.loglik, "loglik_particles": options.select_particles,
         "starts": starts, "local_maxima": maxima,
         "refinement": {"iterations": fit.refine_trace.len(), "particles": options.refine_particles,
@@ -608,5 +621,11 @@ where
         }
         text
     });
+    if fit.interrupted {
+        return Err(CliError::Interrupted {
+            iteration: fit.refine_trace.len(),
+            written: outputs.into_iter().map(|(path, _)| path).collect(),
+        });
+    }
     Ok(())
 }

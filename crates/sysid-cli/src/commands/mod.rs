@@ -94,72 +94,96 @@ impl DataArgs {
         Ok(file)
     }
 
-    fn read_columns(
-        &self,
-        metadata: Option<&Metadata>,
-        outputs_if_present: bool,
-    ) -> Result<DataFile, CliError> {
+    /// The columns to read: those chosen, or where none are, a model's (its
+    /// metadata's names), else the default ones.
+    pub fn choice(&self, metadata: Option<&Metadata>, outputs_if_present: bool) -> ColumnChoice {
         let named = |given: &Option<Vec<String>>, stored: Option<&Vec<String>>| {
             given
                 .clone()
                 .or_else(|| stored.filter(|names| !names.is_empty()).cloned())
         };
-        let file = read_data(
-            &self.data,
-            &ColumnChoice {
-                inputs: named(&self.inputs, metadata.map(|m| &m.inputs)),
-                outputs: named(&self.outputs, metadata.map(|m| &m.outputs)),
-                outputs_if_present,
-            },
-        )?;
+        ColumnChoice {
+            inputs: named(&self.inputs, metadata.map(|m| &m.inputs)),
+            outputs: named(&self.outputs, metadata.map(|m| &m.outputs)),
+            outputs_if_present,
+        }
+    }
+
+    /// `--ts`, checked.
+    pub fn sample_time(&self) -> Result<Option<f64>, CliError> {
+        match self.ts {
+            Some(ts) if !(ts.is_finite() && ts > 0.0) => Err(CliError::BadOption {
+                option: "--ts",
+                message: format!("{ts} is not a positive sampling interval"),
+            }),
+            ts => Ok(ts),
+        }
+    }
+
+    fn read_columns(
+        &self,
+        metadata: Option<&Metadata>,
+        outputs_if_present: bool,
+    ) -> Result<DataFile, CliError> {
+        let file = read_data(&self.data, &self.choice(metadata, outputs_if_present))?;
         let mut file = match &self.range {
             None => file,
             Some(range) => rows(file, range)?,
         };
-        if let Some(ts) = self.ts {
-            if !(ts.is_finite() && ts > 0.0) {
-                return Err(CliError::BadOption {
-                    option: "--ts",
-                    message: format!("{ts} is not a positive sampling interval"),
-                });
-            }
+        if let Some(ts) = self.sample_time()? {
             file.sample_time = Some(ts);
         }
         Ok(file)
     }
 }
 
-/// The rows `START..=END` (1-based) of a data file, from `--range START:END`.
-pub fn rows(mut file: DataFile, range: &str) -> Result<DataFile, CliError> {
-    let total = file.record.len();
-    let bad = |message: String| CliError::BadOption {
-        option: "--range",
-        message,
-    };
+/// `--range START:END` (1-based): the first row and, when given, the last.
+pub fn parse_range(range: &str) -> Result<(usize, Option<usize>), CliError> {
     let (start, end) = range
         .split_once(':')
-        .ok_or_else(|| bad(format!("{range:?} is not START:END (e.g. 1:400, 401:)")))?;
-    let bound = |text: &str, default: usize| -> Result<usize, CliError> {
+        .ok_or_else(|| bad_range(format!("{range:?} is not START:END (e.g. 1:400, 401:)")))?;
+    let bound = |text: &str| -> Result<Option<usize>, CliError> {
         if text.trim().is_empty() {
-            return Ok(default);
+            return Ok(None);
         }
         text.trim()
             .parse::<usize>()
-            .map_err(|_| bad(format!("{text:?} is not a row number")))
+            .map(Some)
+            .map_err(|_| bad_range(format!("{text:?} is not a row number")))
     };
-    let (start, end) = (bound(start, 1)?, bound(end, total)?);
+    Ok((bound(start)?.unwrap_or(1), bound(end)?))
+}
+
+fn bad_range(message: String) -> CliError {
+    CliError::BadOption {
+        option: "--range",
+        message,
+    }
+}
+
+/// Refuses rows `start..=end` of a file of `total` rows unless they are within it.
+pub fn check_range(start: usize, end: usize, total: usize) -> Result<(), CliError> {
     if start == 0 || start > end || end > total {
-        return Err(bad(format!(
+        return Err(bad_range(format!(
             "rows {start} to {end} are not within the file's 1 to {total}"
         )));
     }
+    Ok(())
+}
+
+/// The rows `START..=END` (1-based) of a data file, from `--range START:END`.
+pub fn rows(mut file: DataFile, range: &str) -> Result<DataFile, CliError> {
+    let total = file.record.len();
+    let (start, end) = parse_range(range)?;
+    let end = end.unwrap_or(total);
+    check_range(start, end, total)?;
     let (from, len) = (start - 1, end - start + 1);
     file.record = sysid::kalman::Record::new(
         file.record.u.columns(from, len).clone_owned(),
         file.record.y.columns(from, len).clone_owned(),
     );
     file.time = file.time[from..from + len].to_vec();
-    file.labels = file.labels[from..from + len].to_vec();
+    file.labels = file.labels.range(from, len);
     Ok(file)
 }
 
@@ -170,9 +194,17 @@ pub fn check_columns(model: &LinearGaussianModel, file: &DataFile) -> Result<(),
 
 /// Checks that a data file has `inputs` input and `outputs` output columns.
 pub fn check_column_counts(file: &DataFile, inputs: usize, outputs: usize) -> Result<(), CliError> {
+    check_counts(
+        (file.input_names.len(), file.output_names.len()),
+        (inputs, outputs),
+    )
+}
+
+/// Checks that the (inputs, outputs) columns `found` are those `expected`.
+pub fn check_counts(found: (usize, usize), expected: (usize, usize)) -> Result<(), CliError> {
     for (what, found, expected) in [
-        ("input", file.input_names.len(), inputs),
-        ("output", file.output_names.len(), outputs),
+        ("input", found.0, expected.0),
+        ("output", found.1, expected.1),
     ] {
         if found != expected {
             return Err(CliError::ColumnCount {

@@ -37,7 +37,7 @@ pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{
     LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome, StartStatus,
-    describe, fit_robust,
+    describe, fit_robust, fit_robust_until,
 };
 pub use stats::{AffineStatistics, StatisticsCollector};
 

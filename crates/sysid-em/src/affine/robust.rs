@@ -261,6 +261,8 @@ pub struct RobustFit {
     pub warnings: Vec<String>,
     /// Where the time went.
     pub timing: RobustTiming,
+    /// Whether [`fit_robust_until`]'s `stop` ended the run early.
+    pub interrupted: bool,
 }
 
 /// Two maxima closer than this (nats) are not clearly separated.
@@ -287,6 +289,31 @@ pub fn fit_robust<A, S>(
     smoother: &S,
     options: &RobustOptions,
     seed: u64,
+) -> Result<RobustFit, AffineEmError>
+where
+    A: AffineModel,
+    S: Smoother<A::Smc> + Clone + Send + Sync,
+{
+    fit_robust_until(model, data, start, spec, smoother, options, seed, &|| false)
+}
+
+/// [`fit_robust`] that ends early when `stop()` turns true (e.g. on Ctrl-C), checked
+/// after every EM iteration: the exploration ends with the ranking so far, the
+/// refinement with the iterates so far, and the result (scored, averaged as usual) has
+/// [`RobustFit::interrupted`] set and says so in its warnings.
+///
+/// # Errors
+/// As [`fit_robust`].
+#[allow(clippy::too_many_arguments)]
+pub fn fit_robust_until<A, S>(
+    model: &A,
+    data: Series<'_>,
+    start: &AffineParams,
+    spec: &AffineEmSpec,
+    smoother: &S,
+    options: &RobustOptions,
+    seed: u64,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<RobustFit, AffineEmError>
 where
     A: AffineModel,
@@ -345,7 +372,7 @@ where
         }
         let advance = |x: &mut Explorer<'_, A, S>| {
             let began = Instant::now();
-            x.advance(iterations, options);
+            x.advance(iterations, options, stop);
             if x.outcome.status == StartStatus::Explored {
                 x.outcome.loglik = None;
                 let scored = Instant::now();
@@ -388,6 +415,14 @@ where
             }
         }
         if ranked.len() <= 1 {
+            break;
+        }
+        if stop() {
+            // interrupted: the best so far goes on (to a refinement that stops too)
+            for &(k, _) in &ranked[1..] {
+                starts[k].outcome.status = StartStatus::Dropped { round };
+            }
+            last_round = ranked;
             break;
         }
         for &(k, _) in &ranked[ranked.len().div_ceil(2)..] {
@@ -476,6 +511,9 @@ where
     let mut trace = Vec::with_capacity(options.refine_iterations);
     let mut refine_loglik = Vec::with_capacity(options.refine_iterations);
     for iteration in 1..=options.refine_iterations {
+        if stop() {
+            break;
+        }
         match em.step(&current) {
             Ok((next, l)) => {
                 trace.push(next.clone());
@@ -493,9 +531,29 @@ where
         }
     }
     timing.refine = began.elapsed();
-    let estimate = average(&trace[trace.len() / 2..]);
+    let interrupted = stop();
+    if interrupted {
+        warnings.push(format!(
+            "interrupted after {} of {} refinement iterations: the estimate is {}, not the \
+             finished fit",
+            trace.len(),
+            options.refine_iterations,
+            if trace.is_empty() {
+                "the best start's exploration"
+            } else {
+                "the average of the refinement so far"
+            }
+        ));
+    }
+    let estimate = if trace.is_empty() {
+        best.estimate.clone()
+    } else {
+        average(&trace[trace.len() / 2..])
+    };
     let stop = refine_stop(model, &trace);
-    if let RefineStop::StillMoving { change } = stop {
+    if let RefineStop::StillMoving { change } = stop
+        && !interrupted
+    {
         warnings.push(format!(
             "the refinement had not settled: a coefficient's average moved by {:.1} % \
              between the last two quarters of its {} iterations (more than {:.1} %); run \
@@ -527,6 +585,7 @@ where
         refine_loglik,
         warnings,
         timing,
+        interrupted,
     })
 }
 
@@ -685,9 +744,12 @@ impl<'a, A: AffineModel, S: Smoother<A::Smc> + Clone> Explorer<'a, A, S> {
     }
 
     /// Runs `iterations` more; the estimate is the average of the last quarter.
-    fn advance(&mut self, iterations: usize, options: &RobustOptions) {
+    fn advance(&mut self, iterations: usize, options: &RobustOptions, stop: &dyn Fn() -> bool) {
         let mut trace = Vec::with_capacity(iterations);
         for _ in 0..iterations {
+            if stop() {
+                break;
+            }
             match self.em.step(&self.current) {
                 Ok((next, _)) => {
                     self.current = next;
@@ -716,6 +778,11 @@ impl<'a, A: AffineModel, S: Smoother<A::Smc> + Clone> Explorer<'a, A, S> {
                 };
                 return;
             }
+        }
+        if trace.is_empty() {
+            // stopped before this round's first iteration: the estimate so far stands
+            self.outcome.estimate = self.current.clone();
+            return;
         }
         let tail = trace.len() - (trace.len() / 4).max(1);
         self.outcome.estimate = average(&trace[tail..]);

@@ -3,7 +3,7 @@
 //! repository's fixtures), and must succeed.
 
 mod common;
-use common::scratch_dir;
+use common::{assert_clean_figures, scratch_dir, svg_texts};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -81,6 +81,41 @@ fn the_readme_tour_runs() {
     for file in ["fit.json", "smoothed.csv", "nl.json", "chains.csv"] {
         assert!(dir.join(file).exists(), "{file}");
     }
+    // the figures: titles, axes and legends, phase beside magnitude, a long record
+    // shown whole and in a stated window
+    assert_eq!(assert_clean_figures(&dir.join("figures")), 3);
+    for (figure, expected) in [
+        (
+            "bode",
+            &[
+                "G11 (u1 to y1): magnitude",
+                "G22 (u2 to y2): phase",
+                "phase (degrees)",
+                "n4sid",
+                "true",
+            ][..],
+        ),
+        ("trace-trace", &["log-likelihood", "EM iteration"][..]),
+        (
+            "nl-smoothed-states",
+            &[
+                "state x1",
+                "state x1, rows 1-100 of 1000",
+                "95 % band",
+                "true state",
+                "estimate",
+            ][..],
+        ),
+    ] {
+        let texts =
+            svg_texts(&std::fs::read_to_string(dir.join(format!("figures/{figure}.svg"))).unwrap());
+        for text in expected {
+            assert!(
+                texts.iter().any(|t| t == text),
+                "{figure}: no {text:?} in {texts:?}"
+            );
+        }
+    }
 }
 
 /// The `sysid` lines of every ```sh block of a file, in order.
@@ -106,6 +141,33 @@ fn every_command_of_the_guide_runs() {
         svg.contains("heat1: 95 % band"),
         "the structural model's band"
     );
+    // every figure of the guide: no round-off tick labels
+    assert!(assert_clean_figures(&dir) >= 6);
+    for (figure, expected) in [
+        (
+            "heat-figures/step",
+            &["step response, u1 to y1", "heat-n4sid", "heat"][..],
+        ),
+        (
+            "heat-figures/resid",
+            &[
+                "autocorrelation of y1's errors",
+                "95 % bound of white noise",
+            ][..],
+        ),
+        (
+            "osc-figures/osc-states-states",
+            &["state x1", "state x2", "95 % band"][..],
+        ),
+    ] {
+        let texts = svg_texts(&std::fs::read_to_string(dir.join(format!("{figure}.svg"))).unwrap());
+        for text in expected {
+            assert!(
+                texts.iter().any(|t| t == text),
+                "{figure}: no {text:?} in {texts:?}"
+            );
+        }
+    }
     for file in [
         "heat.json",
         "heat-figures/compare.svg",

@@ -84,10 +84,11 @@ fn demo_prints_the_table_and_draws_the_five_figures() {
         &figures,
         "bode",
         &[
-            "G11",
-            "G22",
+            "G11 (u1 to y1): magnitude",
+            "G22 (u2 to y2): phase",
             "frequency (rad/sample)",
             "magnitude (dB)",
+            "phase (degrees)",
             "truth",
             "N4SID (order 8)",
             "EM from N4SID",
@@ -101,6 +102,7 @@ fn demo_prints_the_table_and_draws_the_five_figures() {
             "true state",
             "smoothed mean",
             "time step t",
+            "steps 1-100 of 1000",
         ],
     );
     assert_figure(
@@ -112,6 +114,8 @@ fn demo_prints_the_table_and_draws_the_five_figures() {
             "EM runs (one line each)",
         ],
     );
+    // no round-off residue among the tick labels of the five figures
+    assert_eq!(common::assert_clean_figures(&figures), 5);
     // the directory was given: a second run refuses to replace the figures
     let again = sysid(&[
         "demo",
@@ -354,4 +358,55 @@ fn threads_zero_is_refused_and_help_has_examples() {
             "{command} --help:\n{help}"
         );
     }
+}
+
+/// A chain file of `pmmh` is plotted as chains: one panel per parameter and the
+/// log-likelihood, one line per chain, not `chain`, `iteration` and `burn_in` as data.
+#[test]
+fn plot_recognises_a_chain_file() {
+    let dir = scratch_dir();
+    let data = simulate(&dir, "lgss", 200, 3);
+    let chains = dir.join("chains.csv");
+    assert_ok(&sysid(&[
+        "pmmh",
+        "--system",
+        "lgss",
+        "--data",
+        s(&data),
+        "--iters",
+        "300",
+        "--particles",
+        "30",
+        "--chains",
+        "2",
+        "--out",
+        s(&chains),
+        "--quiet",
+    ]));
+    let figures = dir.join("figures");
+    assert_ok(&sysid(&["plot", s(&chains), "--out-dir", s(&figures)]));
+    let svg = std::fs::read_to_string(figures.join("chains-chains.svg")).unwrap();
+    let texts = common::svg_texts(&svg);
+    for expected in [
+        "phi (burn-in before iteration 60, faint)",
+        "q (burn-in before iteration 60, faint)",
+        "loglik (burn-in before iteration 60, faint)",
+        "chain 0",
+        "chain 1",
+        "iteration",
+    ] {
+        assert!(
+            texts.iter().any(|t| t == expected),
+            "{expected:?} in {texts:?}"
+        );
+    }
+    for absent in ["burn_in", "chain", "accepted", "log_prior"] {
+        assert!(
+            !texts
+                .iter()
+                .any(|t| t.starts_with(absent) && !t.starts_with("chain ")),
+            "{absent:?} in {texts:?}"
+        );
+    }
+    assert_eq!(common::assert_clean_figures(&figures), 1);
 }

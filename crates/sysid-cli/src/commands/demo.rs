@@ -12,7 +12,6 @@
 use crate::error::CliError;
 use crate::files::fmt;
 use crate::progress::{Progress, note};
-use nalgebra::DMatrix;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -28,7 +27,7 @@ use sysid::smc::{FfbsiReject, FilterOptions, ParticleFilter, Series, Smoother, T
 use sysid::subspace::{N4sidOptions, Order, n4sid};
 use sysid_bench::nlbench_study::{Method, NlbenchRun, NlbenchStudy, abcd, within_ten_percent};
 use sysid_plot::trajectories::{Run, parameter_trajectories};
-use sysid_plot::{Band, Figure, Panel, Scale, Series as Curve, Stroke};
+use sysid_plot::{Band, Figure, Panel, Series as Curve, Stroke};
 
 /// Options of `sysid demo`.
 #[derive(clap::Args, Debug)]
@@ -285,55 +284,24 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// |G_ij(e^{i omega})| in dB on a log grid, per channel.
-fn bode_panels(rows: &[LinearRow]) -> Vec<Panel> {
-    let grid: Vec<f64> = (0..240)
-        .map(|k| std::f64::consts::PI * 10f64.powf(-2.5 + 2.5 * k as f64 / 239.0))
-        .collect();
-    let responses: Vec<Vec<Option<DMatrix<nalgebra::Complex<f64>>>>> = rows
+/// Bode magnitude and phase of every channel (`sysid plot`'s figure), the truth dashed
+/// in black; the EM run from the paper's model is left out (it overlays EM from N4SID).
+fn bode(rows: &[LinearRow]) -> Result<Figure, CliError> {
+    let models: Vec<(String, LinearGaussianModel)> = rows
         .iter()
-        .map(|r| {
-            grid.iter()
-                .map(|&w| r.model.frequency_response(w))
-                .collect()
-        })
+        .filter(|r| r.name != "EM from the paper's model")
+        .map(|r| (r.name.to_string(), r.model.clone()))
         .collect();
-    let mut panels = Vec::new();
-    for i in 0..2 {
-        for j in 0..2 {
-            let mut panel = Panel::new(
-                format!("G{}{}", i + 1, j + 1),
-                "frequency (rad/sample)",
-                "magnitude (dB)",
-            )
-            .scales(Scale::Log, Scale::Linear);
-            for (k, row) in rows
-                .iter()
-                .enumerate()
-                .filter(|(_, r)| r.name != "EM from the paper's model")
-            {
-                let points = grid
-                    .iter()
-                    .zip(&responses[k])
-                    .map(|(&w, g)| {
-                        (
-                            w,
-                            g.as_ref()
-                                .map_or(f64::NAN, |g| 20.0 * g[(i, j)].norm().log10()),
-                        )
-                    })
-                    .collect();
-                let curve = Curve::line(row.name, points);
-                panel = panel.with_series(if row.name == "truth" {
-                    curve.stroke(Stroke::Dashed).colour(6)
-                } else {
-                    curve.colour(k)
-                });
+    let mut figure = super::plot::bode_figure(&models, &[], None)?;
+    for panel in &mut figure.panels {
+        for series in &mut panel.series {
+            if series.name.as_deref() == Some("truth") {
+                series.stroke = Stroke::Dashed;
+                series.colour = Some(6);
             }
-            panels.push(panel);
         }
     }
-    panels
+    Ok(figure)
 }
 
 /// One EM run's line in a bundle; the first carries the bundle's legend entry.
@@ -374,6 +342,7 @@ fn trajectory_figure(title: &str, runs: &[NlbenchRun], x_label: &str) -> Figure 
 }
 
 fn figures(
+    bode: Figure,
     linear: &LinearPart,
     runs: &[NlbenchRun],
     robust: &[NlbenchRun],
@@ -395,8 +364,11 @@ fn figures(
         .collect();
     let states = Panel::new(
         format!(
-            "nlbench, run {} (highest final log-likelihood): smoothed state at its EM estimate",
-            best.run
+            "nlbench run {} (best final log-likelihood): smoothed state at its EM estimate, \
+             steps 1-{} of {}",
+            best.run,
+            shown_steps.min(smoothed.len()),
+            smoothed.len()
         ),
         "time step t",
         "state x(t)",
@@ -458,7 +430,7 @@ fn figures(
         .colour(6),
     );
     let mut particle_trace = Panel::new(
-        "nlbench: particle EM (estimates)",
+        "nlbench: paper's particle EM, log-likelihood estimates (M = 50)",
         "EM iteration",
         "log-likelihood",
     );
@@ -476,7 +448,7 @@ fn figures(
     vec![
         ("em-trajectories", trajectories),
         ("em-trajectories-robust", robust_trajectories),
-        ("bode", Figure::grid(bode_panels(&linear.rows), 2)),
+        ("bode", bode),
         ("smoothed-state", Figure::single(states)),
         (
             "loglik-trace",
@@ -544,7 +516,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         source,
     })?;
     let mut written = Vec::new();
-    for (stem, figure) in figures(&linear, &results, &robust, best, &smoothed, 100) {
+    let bode = bode(&linear.rows)?;
+    for (stem, figure) in figures(bode, &linear, &results, &robust, best, &smoothed, 100) {
         written.extend(figure.write(&dir, stem, overwrite)?);
     }
     let total = started.elapsed().as_secs_f64();

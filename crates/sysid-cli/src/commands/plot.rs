@@ -5,6 +5,7 @@
 //! | EM trace (`fit --trace`) | columns `iteration, loglik, ...` | log-likelihood, and one panel per parameter column |
 //! | model (`fit`, `n4sid`, `simulate --model-out`) | `.json` | Bode magnitude of every input-output channel, one curve per model |
 //! | states (`smooth`, `filter`, `psmooth`, `pf`) | columns `t, x1.., [x1_sd..]` | each state with a 95 % band (mean +- 1.96 sd), against `--truth` |
+//! | chains (`pmmh --out`, `pgas --out`) | columns `chain, iteration, burn_in, ...` | each parameter and the log-likelihood against the iteration, one line per chain, the burn-in faint |
 //! | data (`simulate`) | columns `t, u.., y..` | each column against t |
 //!
 //! Figures are `<out-dir>/<file stem>-<kind>.svg` and `.png`; the models together give
@@ -23,8 +24,9 @@ pub struct Options {
     /// Files written by sysid: EM traces, models (JSON), states, data (CSV).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// What the files are: auto (from their content), trace, bode, states or data; for
-    /// model files also step or impulse (their responses from rest, per channel).
+    /// What the files are: auto (from their content), trace, bode, states, chains or
+    /// data; for model files also step or impulse (their responses from rest, per
+    /// channel).
     #[arg(long, default_value = "auto")]
     pub kind: String,
     /// States: a data file with the true states (columns x1, x2, ...; `simulate`
@@ -49,6 +51,7 @@ enum Kind {
     Step,
     Impulse,
     States,
+    Chain,
     Data,
 }
 
@@ -60,6 +63,7 @@ impl Kind {
             Kind::Step => "step",
             Kind::Impulse => "impulse",
             Kind::States => "states",
+            Kind::Chain => "chains",
             Kind::Data => "data",
         }
     }
@@ -80,6 +84,7 @@ fn kind_of(path: &Path, requested: &str) -> Result<Kind, CliError> {
         "step" => Kind::Step,
         "impulse" => Kind::Impulse,
         "states" => Kind::States,
+        "chains" => Kind::Chain,
         "data" => Kind::Data,
         "auto" => {
             if path
@@ -89,9 +94,10 @@ fn kind_of(path: &Path, requested: &str) -> Result<Kind, CliError> {
                 return Ok(Kind::Bode);
             }
             let (header, _) = crate::files::read_rows(path)?;
-            if header.first().is_some_and(|h| h == "iteration")
-                && header.iter().any(|h| h == "loglik")
-            {
+            let has = |name: &str| header.iter().any(|h| h == name);
+            if has("chain") && has("iteration") && has("burn_in") {
+                Kind::Chain
+            } else if header.first().is_some_and(|h| h == "iteration") && has("loglik") {
                 Kind::Trace
             } else if header.iter().any(|h| h.ends_with("_sd"))
                 || (header.iter().any(|h| h == "x1") && !header.iter().any(|h| h.starts_with('y')))
@@ -105,7 +111,7 @@ fn kind_of(path: &Path, requested: &str) -> Result<Kind, CliError> {
             return Err(CliError::BadOption {
                 option: "--kind",
                 message: format!(
-                    "unknown kind {other:?} (known: auto, trace, bode, step, impulse, states, data)"
+                    "unknown kind {other:?} (known: auto, trace, bode, step, impulse, states, chains, data)"
                 ),
             });
         }
@@ -158,6 +164,68 @@ fn trace_figure(path: &Path) -> Result<Figure, CliError> {
     Ok(Figure::grid(panels, columns))
 }
 
+/// MCMC chains: per parameter (and the log-likelihood), each chain's draws against the
+/// iteration; the burn-in faint, the kept draws solid.
+fn chain_figure(path: &Path) -> Result<Figure, CliError> {
+    let (header, columns) = read_columns(path)?;
+    let get = |name: &str| column(&header, &columns, name).cloned().unwrap_or_default();
+    let (chain, iteration, burn_in) = (get("chain"), get("iteration"), get("burn_in"));
+    let chains: Vec<usize> = {
+        let mut ids: Vec<usize> = chain.iter().map(|&c| c.max(0.0) as usize).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    };
+    let bookkeeping = ["chain", "iteration", "burn_in", "log_prior", "accepted"];
+    let kept_from = iteration
+        .iter()
+        .zip(&burn_in)
+        .filter(|(_, b)| **b == 0.0)
+        .map(|(&i, _)| i)
+        .fold(f64::INFINITY, f64::min);
+    let mut panels = Vec::new();
+    for (name, values) in header
+        .iter()
+        .zip(&columns)
+        .filter(|(h, _)| !bookkeeping.contains(&h.as_str()))
+    {
+        let title = if kept_from.is_finite() {
+            format!("{name} (burn-in before iteration {kept_from}, faint)")
+        } else {
+            format!("{name} (burn-in only)")
+        };
+        let mut panel = Panel::new(title, "iteration", name.clone());
+        for (k, &id) in chains.iter().enumerate() {
+            let part = |burn: bool| -> Vec<(f64, f64)> {
+                (0..values.len())
+                    .filter(|&r| chain[r] as usize == id && (burn_in[r] != 0.0) == burn)
+                    .map(|r| (iteration[r], values[r]))
+                    .collect()
+            };
+            let burn = part(true);
+            if !burn.is_empty() {
+                panel = panel.with_series(Series::faint(burn).colour(k));
+            }
+            let kept = part(false);
+            if !kept.is_empty() {
+                panel = panel.with_series(Series::line(format!("chain {id}"), kept).colour(k));
+            }
+        }
+        panels.push(panel);
+    }
+    if panels.is_empty() || chains.is_empty() {
+        return Err(bad(format!(
+            "{}: no draws (columns besides chain, iteration, burn_in)",
+            path.display()
+        )));
+    }
+    let columns = if panels.len() > 1 { 2 } else { 1 };
+    Ok(Figure::grid(panels, columns))
+}
+
+/// The rows of the detail panel beside a long record's states.
+const WINDOW: usize = 100;
+
 fn states_figure(path: &Path, truth: Option<&Path>) -> Result<Figure, CliError> {
     let (header, columns) = read_columns(path)?;
     let t = abscissa(&header, &columns, "t");
@@ -190,46 +258,53 @@ fn states_figure(path: &Path, truth: Option<&Path>) -> Result<Figure, CliError> 
         }
     }
     let mut panels = Vec::new();
+    // a long record is shown whole and, beside it, its first WINDOW rows in detail
+    let rows = t.len();
+    let windowed = rows > 3 * WINDOW;
     for i in 1.. {
         let name = format!("x{i}");
         let Some(mean) = column(&header, &columns, &name) else {
             break;
         };
-        let mut panel = Panel::new(format!("state {name}"), "t", name.clone());
-        if let Some(sd) = column(&header, &columns, &format!("{name}_sd")) {
-            let band = t
-                .iter()
-                .zip(mean)
-                .zip(sd)
-                .map(|((&t, &m), &s)| (t, m - 1.96 * s, m + 1.96 * s))
-                .collect();
-            panel = panel.with_band(Band {
-                name: "95 % band".into(),
-                points: band,
-                colour: 0,
-            });
-        }
-        panel = panel.with_series(
-            Series::line(
-                "estimate",
-                t.iter().copied().zip(mean.iter().copied()).collect(),
-            )
-            .colour(0),
-        );
-        if let Some((th, tc)) = &truth
-            && let Some(x) = column(th, tc, &name)
-        {
-            let tt = abscissa(th, tc, "t");
+        let sd = column(&header, &columns, &format!("{name}_sd"));
+        let true_state = truth.as_ref().and_then(|(th, tc)| {
+            let x = column(th, tc, &name)?;
+            Some(abscissa(th, tc, "t").into_iter().zip(x.iter().copied()))
+        });
+        let panel = |title: String, shown: std::ops::Range<usize>| {
+            let mut panel = Panel::new(title, "t", name.clone());
+            let (first, last) = (t[shown.start], t[shown.end - 1]);
+            if let Some(sd) = sd {
+                let band = shown
+                    .clone()
+                    .map(|k| (t[k], mean[k] - 1.96 * sd[k], mean[k] + 1.96 * sd[k]))
+                    .collect();
+                panel = panel.with_band(Band {
+                    name: "95 % band".into(),
+                    points: band,
+                    colour: 0,
+                });
+            }
             panel = panel.with_series(
-                Series::line(
-                    "true state",
-                    tt.into_iter().zip(x.iter().copied()).collect(),
-                )
-                .stroke(Stroke::Dashed)
-                .colour(1),
+                Series::line("estimate", shown.map(|k| (t[k], mean[k])).collect()).colour(0),
             );
+            if let Some(points) = true_state.clone() {
+                let points = points.filter(|&(x, _)| x >= first && x <= last).collect();
+                panel = panel.with_series(
+                    Series::line("true state", points)
+                        .stroke(Stroke::Dashed)
+                        .colour(1),
+                );
+            }
+            panel
+        };
+        panels.push(panel(format!("state {name}"), 0..rows));
+        if windowed {
+            panels.push(panel(
+                format!("state {name}, rows 1-{WINDOW} of {rows}"),
+                0..WINDOW,
+            ));
         }
-        panels.push(panel);
     }
     if panels.is_empty() {
         return Err(bad(format!(
@@ -263,7 +338,7 @@ fn data_figure(path: &Path) -> Result<Figure, CliError> {
 }
 
 /// Bode magnitudes of every channel, one curve per model.
-fn bode_figure(
+pub(crate) fn bode_figure(
     models: &[(String, LinearGaussianModel)],
     covariances: &[Option<ParameterCovariance>],
     sample_time: Option<f64>,
@@ -561,6 +636,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 let figure = match kind {
                     Kind::Trace => trace_figure(path)?,
                     Kind::States => states_figure(path, o.truth.as_deref())?,
+                    Kind::Chain => chain_figure(path)?,
                     _ => data_figure(path)?,
                 };
                 jobs.push((format!("{}-{}", stem(path), kind.name()), figure));

@@ -99,3 +99,50 @@ pub fn entries(dir: &Path) -> Vec<String> {
     names.sort();
     names
 }
+
+/// The text elements of an SVG figure (titles, axis labels, tick labels, legends).
+pub fn svg_texts(svg: &str) -> Vec<String> {
+    svg.split("<text")
+        .skip(1)
+        .filter_map(|part| {
+            let body = part.split_once('>')?.1;
+            let text = body.split("</text>").next()?.trim();
+            Some(
+                text.replace("&apos;", "'")
+                    .replace("&quot;", "\"")
+                    .replace("&lt;", "<")
+                    .replace("&gt;", ">")
+                    .replace("&amp;", "&"),
+            )
+        })
+        .collect()
+}
+
+/// Checks every SVG figure under `dir` (recursively): it has text, and no tick label
+/// is a round-off residue such as `-1.11e-16` where 0 is meant.
+pub fn assert_clean_figures(dir: &Path) -> usize {
+    let mut checked = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            checked += assert_clean_figures(&path);
+            continue;
+        }
+        if path.extension().is_none_or(|e| e != "svg") {
+            continue;
+        }
+        let texts = svg_texts(&std::fs::read_to_string(&path).unwrap());
+        assert!(texts.len() >= 4, "{}: {texts:?}", path.display());
+        for text in &texts {
+            if let Ok(v) = text.parse::<f64>() {
+                assert!(
+                    v == 0.0 || v.abs() > 1e-12,
+                    "{}: tick label {text:?}",
+                    path.display()
+                );
+            }
+        }
+        checked += 1;
+    }
+    checked
+}

@@ -1,5 +1,5 @@
 //! The canonical systems as parametrised families for the Bayesian samplers of
-//! `sysid-pmcmc`, with an exact conjugate parameter step for `lgss`.
+//! `sysid-pmcmc`, with exact conjugate parameter steps for `lgss` and `nlbench`.
 
 use rand::RngExt;
 use rand_distr::{Distribution, Gamma, Normal, StandardNormal};
@@ -8,7 +8,7 @@ use sysid_pmcmc::{ModelFamily, ParameterStep, Prior, ScalarPrior, Support};
 use sysid_smc::{Rng, Series, stream};
 
 use crate::{LinearGaussianSmc, Nlbench, NlbenchParams};
-use nalgebra::dmatrix;
+use nalgebra::{Matrix3, Vector3, dmatrix};
 
 /// The scalar linear Gaussian family with `theta = (phi, q, r)`.
 ///
@@ -284,5 +284,184 @@ impl ModelFamily for NlbenchFamily {
             (p.q, p.r) = (theta[4], theta[5]);
         }
         Nlbench::new(p)
+    }
+}
+
+/// The exact Gibbs draw of the parameters given the states for [`NlbenchFamily`], under
+/// conjugate priors: `a, b, c, d` normal, and (with `estimate_noise`) `q, r` inverse
+/// gamma.
+///
+/// # Algorithm
+/// Given the states, the transition is a linear regression of `x_{t+1}` on
+/// `z_t = [x_t, x_t / (1 + x_t^2), cos(1.2 (t + 1))]` and the observation one of `y_t`
+/// on `x_t^2`. In turn (a systematic-scan Gibbs sweep, which leaves
+/// `p(theta | x, y)` invariant):
+/// ```text
+/// (a, b, c) | x, q ~ N(P^{-1} (S0^{-1} m0 + sum z_t x_{t+1} / q), P^{-1}),
+///                     P = S0^{-1} + sum z_t z_t' / q
+/// q | x, a, b, c   ~ IG(a_q + (T-1)/2, b_q + sum (x_{t+1} - z_t'(a, b, c))^2 / 2)
+/// d | x, y, r      ~ N((m_d / s_d^2 + sum y_t x_t^2 / r) / p, 1 / p),
+///                     p = 1 / s_d^2 + sum x_t^4 / r   (observed t)
+/// r | x, y, d      ~ IG(a_r + T_obs / 2, b_r + sum (y_t - d x_t^2)^2 / 2)
+/// ```
+/// With the noise variances fixed the sweep draws `theta` exactly from its conditional
+/// (independent draws given the states), where a random-walk step is rejected almost
+/// always: with 1000 states the conditional of `b` has a standard deviation near 0.1.
+///
+/// # Example
+/// ```
+/// use sysid_models::{NlbenchConjugate, NlbenchFamily, Nlbench, NlbenchParams};
+/// use sysid_pmcmc::{ParameterStep, ScalarPrior};
+/// use sysid_smc::{Series, stream};
+/// let family = NlbenchFamily::default();
+/// let sim = Nlbench::new(NlbenchParams::TRUE).unwrap().simulate(500, 3);
+/// let data = Series::new(&sim.outputs, 1).unwrap();
+/// let normal = |sd| ScalarPrior::Normal { mean: 0.0, sd };
+/// let mut step = NlbenchConjugate::from_priors(&family, &[normal(10.0), normal(100.0), normal(100.0), normal(10.0)]).unwrap();
+/// let mut theta = vec![1.0, 1.0, 1.0, 1.0];
+/// step.update(&family, &mut theta, &sim.states, &data, &mut stream(1, 0)).unwrap();
+/// assert!((theta[1] - 25.0).abs() < 2.0); // b, from one draw given the true states
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct NlbenchConjugate {
+    /// `(mean, sd)` of the normal priors of `a, b, c, d`.
+    normal: [(f64, f64); 4],
+    /// `(shape, scale)` of the inverse-gamma priors of `q, r` (with `estimate_noise`).
+    inverse_gamma: Option<[(f64, f64); 2]>,
+}
+
+impl NlbenchConjugate {
+    /// The conjugate step for `family`'s priors (`a, b, c, d` normal, then `q, r`
+    /// inverse gamma with `estimate_noise`), or why they are not conjugate.
+    pub fn from_priors(family: &NlbenchFamily, priors: &[ScalarPrior]) -> Result<Self, String> {
+        let refused = || {
+            format!(
+                "the conjugate nlbench step needs a, b, c, d ~ normal{} priors",
+                if family.estimate_noise {
+                    " and q, r ~ inverse_gamma"
+                } else {
+                    ""
+                }
+            )
+        };
+        if priors.len() != family.dim() {
+            return Err(refused());
+        }
+        let mut normal = [(0.0, 1.0); 4];
+        for (slot, prior) in normal.iter_mut().zip(priors) {
+            let ScalarPrior::Normal { mean, sd } = *prior else {
+                return Err(refused());
+            };
+            *slot = (mean, sd);
+        }
+        let inverse_gamma = match &priors[4..] {
+            [] => None,
+            [
+                ScalarPrior::InverseGamma {
+                    shape: aq,
+                    scale: bq,
+                },
+                ScalarPrior::InverseGamma {
+                    shape: ar,
+                    scale: br,
+                },
+            ] => Some([(*aq, *bq), (*ar, *br)]),
+            _ => return Err(refused()),
+        };
+        Ok(NlbenchConjugate {
+            normal,
+            inverse_gamma,
+        })
+    }
+}
+
+/// A draw from `N(mean, P^{-1})` for a symmetric positive definite precision `P`.
+fn gaussian_from_precision(
+    precision: Matrix3<f64>,
+    rhs: Vector3<f64>,
+    rng: &mut Rng,
+) -> Result<Vector3<f64>, String> {
+    let chol = precision
+        .cholesky()
+        .ok_or("the conditional precision of (a, b, c) is not positive definite")?;
+    let mean = chol.solve(&rhs);
+    let eps = Vector3::from_fn(|_, _| StandardNormal.sample(rng));
+    // P = L L': L^{-T} eps has covariance P^{-1}
+    let offset = chol
+        .l()
+        .transpose()
+        .solve_upper_triangular(&eps)
+        .ok_or("a singular Cholesky factor")?;
+    Ok(mean + offset)
+}
+
+impl ParameterStep<NlbenchFamily> for NlbenchConjugate {
+    fn update(
+        &mut self,
+        family: &NlbenchFamily,
+        theta: &mut [f64],
+        x: &[f64],
+        data: &Series,
+        rng: &mut Rng,
+    ) -> Result<bool, String> {
+        if theta.len() != family.dim() || x.len() < 2 {
+            return Err(format!(
+                "nlbench: {} parameters and {} states (expected {} and at least 2)",
+                theta.len(),
+                x.len(),
+                family.dim()
+            ));
+        }
+        let noise = self.inverse_gamma.filter(|_| family.estimate_noise);
+        let (q, r) = if family.estimate_noise {
+            (theta[4], theta[5])
+        } else {
+            (family.fixed.q, family.fixed.r)
+        };
+        let regressors = |t: usize| {
+            let xt = x[t];
+            Vector3::new(xt, xt / (1.0 + xt * xt), (1.2 * (t + 1) as f64).cos())
+        };
+        // (a, b, c) | x, q
+        let mut precision = Matrix3::zeros();
+        let mut rhs = Vector3::zeros();
+        for k in 0..3 {
+            let (m, s) = self.normal[k];
+            precision[(k, k)] = 1.0 / (s * s);
+            rhs[k] = m / (s * s);
+        }
+        let mut gram = Matrix3::zeros();
+        let mut cross = Vector3::zeros();
+        for t in 0..x.len() - 1 {
+            let z = regressors(t);
+            gram += z * z.transpose();
+            cross += z * x[t + 1];
+        }
+        let abc = gaussian_from_precision(precision + gram / q, rhs + cross / q, rng)?;
+        theta[..3].copy_from_slice(abc.as_slice());
+        if let Some([(aq, bq), _]) = noise {
+            let sq: f64 = (0..x.len() - 1)
+                .map(|t| (x[t + 1] - regressors(t).dot(&abc)).powi(2))
+                .sum();
+            theta[4] = inverse_gamma(aq + 0.5 * (x.len() - 1) as f64, bq + 0.5 * sq, rng)?;
+        }
+        // d | x, y, r
+        let observed = || {
+            (0..x.len())
+                .filter(|&t| !data.is_missing(t))
+                .map(|t| (x[t] * x[t], data.output(t)[0]))
+        };
+        let (md, sd) = self.normal[3];
+        let p = 1.0 / (sd * sd) + observed().map(|(s, _)| s * s).sum::<f64>() / r;
+        let mean = (md / (sd * sd) + observed().map(|(s, y)| s * y).sum::<f64>() / r) / p;
+        let eps: f64 = StandardNormal.sample(rng);
+        theta[3] = mean + eps / p.sqrt();
+        if let Some([_, (ar, br)]) = noise {
+            let (count, sr) = observed().fold((0usize, 0.0), |(c, s), (sq, y)| {
+                (c + 1, s + (y - theta[3] * sq).powi(2))
+            });
+            theta[5] = inverse_gamma(ar + 0.5 * count as f64, br + 0.5 * sr, rng)?;
+        }
+        Ok(true)
     }
 }

@@ -27,7 +27,7 @@ mod wiener_observations;
 mod wiener_start;
 
 pub use affine::{LinearAffine, NlbenchAffine};
-pub use families::{LgssConjugate, LgssFamily, NlbenchFamily};
+pub use families::{LgssConjugate, LgssFamily, NlbenchConjugate, NlbenchFamily};
 pub use gaussian_affine::{GaussianAffineSmc, MAX_REGRESSORS};
 pub use gradient_lgss::LgssGradient;
 pub use linear_smc::{AdapterError, LinearGaussianSmc, MAX_DIM};

@@ -33,7 +33,9 @@ pub mod prior;
 mod support;
 
 pub use chain::Chain;
-pub use diagnostics::{ParameterSummary, effective_sample_size, split_rhat, summarise};
+pub use diagnostics::{
+    ParameterSummary, bulk_ess, effective_sample_size, rank_rhat, split_rhat, summarise, tail_ess,
+};
 pub use error::PmcmcError;
 pub use family::ModelFamily;
 pub use gibbs::{

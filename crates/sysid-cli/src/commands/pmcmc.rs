@@ -17,7 +17,7 @@ use crate::files::{create_output, fmt, json_error};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
-use sysid::models::{LgssConjugate, LgssFamily, NlbenchFamily};
+use sysid::models::{LgssConjugate, LgssFamily, NlbenchConjugate, NlbenchFamily};
 use sysid::pmcmc::{
     Chain, CsmcKernel, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily,
     PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
@@ -127,8 +127,9 @@ pub struct PgasArgs {
     /// plain.
     #[arg(long, default_value = "as")]
     pub kernel: String,
-    /// Parameter step: conjugate (exact; lgss only) or mh (random-walk
-    /// Metropolis-within-Gibbs). Default: conjugate for lgss, mh for nlbench.
+    /// Parameter step: conjugate (the exact draw given the states, for lgss and
+    /// nlbench with their default, conjugate priors) or mh (random-walk
+    /// Metropolis-within-Gibbs; a model file's only step). Default: conjugate.
     #[arg(long)]
     pub step: Option<String>,
     /// Metropolis-within-Gibbs: proposal standard deviations (unconstrained scale).
@@ -446,10 +447,7 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
         return pgas_with(a, &file, &prior, &step, kernel, start, run);
     }
     let system = c.system.clone().unwrap_or_default();
-    let step = a
-        .step
-        .clone()
-        .unwrap_or_else(|| if system == "lgss" { "conjugate" } else { "mh" }.to_string());
+    let step = a.step.clone().unwrap_or_else(|| "conjugate".to_string());
     match (system.as_str(), step.as_str()) {
         ("lgss", "conjugate") => {
             let family = LgssFamily::default();
@@ -474,7 +472,7 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
             let run = lgss_runner(a.guided);
             pgas_with(a, &family, &prior, &step, kernel, vec![0.5, 1.0, 1.0], run)
         }
-        ("nlbench", "mh") => {
+        ("nlbench", step @ ("conjugate" | "mh")) => {
             let family = NlbenchFamily {
                 estimate_noise: c.estimate_noise,
                 ..NlbenchFamily::default()
@@ -486,13 +484,21 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
                     "nlbench has no tractable locally optimal proposal (its output is nonlinear in the state); use the bootstrap kernel",
                 ));
             }
-            let step = mh_step(a, &prior, family.dim())?;
-            let run = particle_gibbs::<NlbenchFamily, IndependentPrior, _>;
-            pgas_with(a, &family, &prior, &step, kernel, family.truth(), run)
+            let start = family.truth();
+            if step == "conjugate" {
+                let conjugate = NlbenchConjugate::from_priors(&family, prior.priors())
+                    .map_err(|e| bad("--step", format!("{e} (or use --step mh)")))?;
+                let run = particle_gibbs::<NlbenchFamily, IndependentPrior, _>;
+                pgas_with(a, &family, &prior, &conjugate, kernel, start, run)
+            } else {
+                let step = mh_step(a, &prior, family.dim())?;
+                let run = particle_gibbs::<NlbenchFamily, IndependentPrior, _>;
+                pgas_with(a, &family, &prior, &step, kernel, start, run)
+            }
         }
         ("lgss" | "nlbench", other) => Err(bad(
             "--step",
-            format!("{other:?} is not available for {system} (known: conjugate for lgss, mh)"),
+            format!("{other:?} is not available for {system} (known: conjugate, mh)"),
         )),
         (other, _) => Err(CliError::UnknownSystem {
             name: other.into(),
@@ -650,13 +656,13 @@ fn finish(
                     .join(" ")
             )];
             lines.push(format!(
-                "{:>6} {:>12} {:>12} {:>10} {:>8} {:>7} {:>12} {:>12}",
-                "param", "mean", "sd", "mcse", "ess", "rhat", "q05", "q95"
+                "{:>6} {:>12} {:>12} {:>10} {:>8} {:>8} {:>7} {:>12} {:>12}",
+                "param", "mean", "sd", "mcse", "ess_bulk", "ess_tail", "rhat", "q05", "q95"
             ));
             for s in &summary {
                 lines.push(format!(
-                    "{:>6} {:>12.6} {:>12.6} {:>10.2e} {:>8.0} {:>7.3} {:>12.6} {:>12.6}",
-                    s.name, s.mean, s.sd, s.mcse, s.ess, s.rhat, s.q05, s.q95
+                    "{:>6} {:>12.6} {:>12.6} {:>10.2e} {:>8.0} {:>8.0} {:>7.3} {:>12.6} {:>12.6}",
+                    s.name, s.mean, s.sd, s.mcse, s.ess_bulk, s.ess_tail, s.rhat, s.q05, s.q95
                 ));
             }
             if let Some(r) = min_update_rate {
@@ -717,7 +723,8 @@ const ESS_LIMIT: f64 = 400.0;
 const ACCEPTANCE_LIMIT: f64 = 0.05;
 
 /// Warnings about chains whose summaries should not be trusted: draws that never
-/// changed, split R-hat above 1.01 (several chains), effective sample size below 400,
+/// changed, rank-normalised R-hat above 1.01 (several chains), bulk or tail effective
+/// sample size below 400 (Vehtari et al. 2021),
 /// PMMH acceptance below 0.05.
 fn mixing_warnings(
     summary: &[sysid::pmcmc::ParameterSummary],
@@ -740,15 +747,19 @@ fn mixing_warnings(
              tune the proposal before using the summaries"
         ));
     }
-    let stuck = list(&|s| (s.sd == 0.0).then(|| s.name.clone()));
+    // no ESS for draws that exist: they never changed
+    let stuck = list(&|s| (s.ess_bulk.is_nan() && !s.mean.is_nan()).then(|| s.name.clone()));
     if !stuck.is_empty() {
         warnings.push(format!(
             "the draws of {stuck} never changed: the sampler did not move them (a summary of \
              one value)"
         ));
     }
-    let low_ess =
-        list(&|s| (s.sd > 0.0 && s.ess < ESS_LIMIT).then(|| format!("{} {:.0}", s.name, s.ess)));
+    let low_ess = list(&|s| {
+        let ess = s.ess_bulk.min(s.ess_tail);
+        (ess < ESS_LIMIT)
+            .then(|| format!("{} bulk {:.0}, tail {:.0}", s.name, s.ess_bulk, s.ess_tail))
+    });
     if !low_ess.is_empty() {
         warnings.push(format!(
             "few effective draws: ESS below {ESS_LIMIT} ({low_ess}); the means and quantiles \

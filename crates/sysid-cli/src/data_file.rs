@@ -521,6 +521,11 @@ impl DataReader {
         self.rows
     }
 
+    /// The bytes of the file read so far (for a progress bar over its size).
+    pub fn bytes_read(&self) -> u64 {
+        self.reader.position().byte()
+    }
+
     /// Whether the file has a time column whose entries, so far, are all numbers.
     pub fn numeric_time(&self) -> bool {
         self.time_col.is_some() && self.numeric_time

@@ -62,15 +62,24 @@ impl Progress {
     /// A bar of `total` steps labelled `label`; hidden under `--quiet`, `json`, or when
     /// stderr is not a terminal.
     pub fn new(total: u64, label: &str, json: bool) -> Progress {
+        Self::with_counts(total, label, json, "{pos}/{len} {msg}")
+    }
+
+    /// A bar over `total` bytes of a file being read (as [`new`](Self::new)).
+    pub fn bytes(total: u64, label: &str, json: bool) -> Progress {
+        Self::with_counts(total, label, json, "{bytes}/{total_bytes}")
+    }
+
+    fn with_counts(total: u64, label: &str, json: bool, counts: &str) -> Progress {
         if json || quiet() || !std::io::stderr().is_terminal() {
             return Progress { bar: None };
         }
         // cleared when the last clone is dropped, also on an early error return
         let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
             .with_finish(ProgressFinish::AndClear);
-        let style = ProgressStyle::with_template(
-            "{prefix:>12} [{bar:32}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
-        )
+        let style = ProgressStyle::with_template(&format!(
+            "{{prefix:>12}} [{{bar:32}}] {counts} ({{elapsed}}, eta {{eta}})"
+        ))
         .map(|s| s.progress_chars("=> "))
         .unwrap_or_else(|_| ProgressStyle::default_bar());
         bar.set_style(style);
@@ -92,6 +101,13 @@ impl Progress {
         bar.set_prefix(label.to_string());
         bar.enable_steady_tick(std::time::Duration::from_millis(120));
         Progress { bar: Some(bar) }
+    }
+
+    /// Moves to step `position`.
+    pub fn set_position(&self, position: u64) {
+        if let Some(bar) = &self.bar {
+            bar.set_position(position);
+        }
     }
 
     /// Advances by `n` steps.

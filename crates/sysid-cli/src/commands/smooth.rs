@@ -159,6 +159,9 @@ fn filter(a: &StatesArgs) -> Result<Summary, CliError> {
     let mut warnings = Vec::new();
     let mut line = String::new();
     let mut record = Some(record);
+    // a bar over the file's bytes: the rows are not counted before they are read
+    let size = std::fs::metadata(path).map_or(0, |m| m.len());
+    let progress = crate::progress::Progress::bytes(size, "filter", a.json);
     while let Some(block) = record {
         let first = filter.steps() == 0;
         let out = filter.push(&block).map_err(in_data(path))?;
@@ -171,8 +174,10 @@ fn filter(a: &StatesArgs) -> Result<Summary, CliError> {
             ));
         }
         write_filtered(&mut w, out, &rows.labels, &mut line).map_err(io)?;
+        progress.set_position(blocks.reader.bytes_read());
         record = blocks.next(&mut rows, BLOCK_STEPS, (m, p))?;
     }
+    progress.finish();
     if let Some(end) = end {
         let total = skipped + filter.steps() + count_rows(blocks.reader, &mut rows)?;
         check_range(start, end, total)?;
@@ -285,6 +290,7 @@ fn write_filtered(
 /// The smoother: by checkpoints (memory: the record and a mean and standard deviation
 /// per state and step), or, for a diffuse initial state, over the whole record.
 fn smooth(a: &StatesArgs) -> Result<Summary, CliError> {
+    let spinner = crate::progress::Progress::spinner("smooth", a.json);
     let (model, file) = a.source.load()?;
     let path = a.source.data_path();
     let (n, t_len) = (model.n(), file.record.len());
@@ -323,6 +329,7 @@ fn smooth(a: &StatesArgs) -> Result<Summary, CliError> {
             })
             .map_err(in_data(path))?
     };
+    spinner.finish();
     let mut w = create_output(&a.out, a.force)?;
     let io = |source| CliError::Io {
         path: a.out.clone(),

@@ -154,6 +154,72 @@ fn a_model_file_goes_through_every_nonlinear_command() {
     ok(&["plot", s(&states), "--out-dir", s(&dir.join("figs"))]);
 }
 
+/// `pgas --model` draws the parameters of a file affine in them exactly given the
+/// states (the default where it applies), and says when it falls back to the
+/// random-walk step.
+#[test]
+fn pgas_draws_an_affine_model_files_parameters_exactly() {
+    let dir = scratch_dir();
+    let model = dir.join("osc.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let data = dir.join("osc.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--steps",
+        "200",
+        "--out",
+        s(&data),
+    ]);
+    let run = |model: &std::path::Path, step: Option<&str>| {
+        let mut args = vec![
+            "pgas",
+            "--model",
+            s(model),
+            "--data",
+            s(&data),
+            "--iters",
+            "300",
+            "--particles",
+            "20",
+            "--chains",
+            "2",
+            "--json",
+        ];
+        if let Some(step) = step {
+            args.extend(["--step", step]);
+        }
+        sysid(&args)
+    };
+    let summary = |out: &std::process::Output| -> serde_json::Value {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value =
+            serde_json::from_str(String::from_utf8_lossy(&out.stdout).lines().last().unwrap())
+                .unwrap();
+        v["summary"].clone()
+    };
+    let default = summary(&run(&model, None));
+    assert_eq!(default, summary(&run(&model, Some("conjugate"))));
+    assert_ne!(default, summary(&run(&model, Some("mh"))));
+    // k*c is not affine: the default falls back and says so; asking for it is an error
+    let product = dir.join("product.toml");
+    std::fs::write(&product, OSCILLATOR.replace("c*v", "k*c*v")).unwrap();
+    let out = run(&product, None);
+    summary(&out);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("random-walk parameter step"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_one_line_error(&run(&product, Some("conjugate")), &["--step", "not affine"]);
+    assert_one_line_error(&run(&model, Some("gibbs")), &["--step", "unknown step"]);
+}
+
 #[test]
 fn a_non_affine_model_file_is_fitted_by_gradient_em() {
     let dir = scratch_dir();

@@ -102,7 +102,7 @@ fn linear_form(
 
 /// Where a free parameter sits in the affine parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Slot {
+pub(crate) enum Slot {
     /// `beta_x[(row, col)]`.
     StateCoef(usize, usize),
     /// `beta_y[(row, col)]`.
@@ -260,6 +260,12 @@ impl ExprAffine {
     /// The model file.
     pub fn file(&self) -> &ModelFile {
         &self.file
+    }
+
+    /// Where parameter `k` (an index of all the file's parameters) sits; `None` for a
+    /// fixed one.
+    pub(crate) fn slot(&self, k: usize) -> Option<Slot> {
+        self.slots[k]
     }
 
     /// The regressors as text (for messages and the docs).

@@ -64,6 +64,7 @@
 
 pub mod affine;
 pub mod builtin;
+pub mod conjugate;
 pub mod expr;
 pub mod gaussian;
 pub mod gradient;
@@ -74,6 +75,7 @@ pub mod spec;
 mod write;
 
 pub use affine::ExprAffine;
+pub use conjugate::AffineConjugate;
 pub use gaussian::{Gaussian, GaussianModel, GaussianSmc};
 pub use gradient::ExprGradient;
 pub use smc::ExprSmc;

@@ -127,9 +127,10 @@ pub struct PgasArgs {
     /// plain.
     #[arg(long, default_value = "as")]
     pub kernel: String,
-    /// Parameter step: conjugate (the exact draw given the states, for lgss and
-    /// nlbench with their default, conjugate priors) or mh (random-walk
-    /// Metropolis-within-Gibbs; a model file's only step). Default: conjugate.
+    /// Parameter step: conjugate (the exact draw given the states: lgss, nlbench, and a
+    /// model file affine in its parameters, with normal priors on the coefficients and
+    /// inverse-gamma ones on the noise variances) or mh (random-walk
+    /// Metropolis-within-Gibbs). Default: conjugate where it applies, else mh.
     #[arg(long)]
     pub step: Option<String>,
     /// Metropolis-within-Gibbs: proposal standard deviations (unconstrained scale).
@@ -437,12 +438,33 @@ pub fn run_pgas(a: &PgasArgs) -> Result<(), CliError> {
                  it has no locally optimal proposal)",
             ));
         }
-        if a.step.as_deref().is_some_and(|s| s != "mh") {
-            return Err(bad("--step", "a model file's parameters take the mh step"));
-        }
         let prior = file_priors(c, &file)?;
-        let step = mh_step(a, &prior, file.dim())?;
         let start = file.free_values();
+        // the exact draw when the file is affine in its parameters with conjugate
+        // priors (the default), else the random-walk step
+        let conjugate = sysid::modelfile::AffineConjugate::new(&file, prior.priors());
+        match (a.step.as_deref(), conjugate) {
+            (None | Some("conjugate"), Ok(conjugate)) => {
+                let run = particle_gibbs::<sysid::modelfile::ModelFile, IndependentPrior, _>;
+                return pgas_with(a, &file, &prior, &conjugate, kernel, start, run);
+            }
+            (Some("conjugate"), Err(why)) => {
+                return Err(bad("--step", format!("{why} (or use --step mh)")));
+            }
+            (None, Err(why)) => {
+                crate::progress::note(&format!(
+                    "pgas: the random-walk parameter step (no conjugate draw: {why})"
+                ));
+            }
+            (Some("mh"), _) => {}
+            (Some(other), _) => {
+                return Err(bad(
+                    "--step",
+                    format!("unknown step {other:?} (known: conjugate, mh)"),
+                ));
+            }
+        }
+        let step = mh_step(a, &prior, file.dim())?;
         let run = particle_gibbs::<sysid::modelfile::ModelFile, IndependentPrior, _>;
         return pgas_with(a, &file, &prior, &step, kernel, start, run);
     }

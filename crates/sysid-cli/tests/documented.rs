@@ -159,6 +159,10 @@ fn every_command_of_the_guide_runs() {
             "osc-figures/osc-states-states",
             &["state x1", "state x2", "95 % band"][..],
         ),
+        (
+            "heat-figures/compare",
+            &["y1: measured and the models' simulation", "measured"][..],
+        ),
     ] {
         let texts = svg_texts(&std::fs::read_to_string(dir.join(format!("{figure}.svg"))).unwrap());
         for text in expected {

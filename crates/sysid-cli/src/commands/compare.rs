@@ -176,8 +176,13 @@ fn figure(
                     .filter(|(_, v)| v.is_finite())
                     .collect()
             };
+            let what = match parse_horizon(horizon) {
+                Ok(Some(1)) => "one-step predictions".to_string(),
+                Ok(Some(k)) => format!("{k}-step predictions"),
+                _ => "simulation".to_string(),
+            };
             let mut panel = Panel::new(
-                format!("{name}: measured and model (horizon {horizon})"),
+                format!("{name}: measured and the models' {what}"),
                 "t",
                 name.clone(),
             )

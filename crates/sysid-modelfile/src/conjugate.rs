@@ -20,8 +20,8 @@
 use crate::affine::Slot;
 use crate::{ExprAffine, ModelFile};
 use nalgebra::{DMatrix, DVector};
-use rand_distr::{Distribution, Gamma, StandardNormal};
 use sysid_em::affine::AffineModel;
+use sysid_pmcmc::conjugate::{gaussian_from_precision, inverse_gamma};
 use sysid_pmcmc::{ParameterStep, ScalarPrior};
 use sysid_smc::{Rng, Series};
 
@@ -148,21 +148,9 @@ impl AffineConjugate {
             precision += &z * z.transpose() / variance;
             rhs += &z * ((target - known) / variance);
         }
-        let chol = precision.cholesky().ok_or_else(|| {
-            format!(
-                "the conditional precision of row {} is not positive definite",
-                row + 1
-            )
-        })?;
-        let mean = chol.solve(&rhs);
-        let eps = DVector::from_fn(k, |_, _| StandardNormal.sample(rng));
-        let offset = chol
-            .l()
-            .transpose()
-            .solve_upper_triangular(&eps)
-            .ok_or("a singular Cholesky factor")?;
+        let draw = gaussian_from_precision(precision, &rhs, &format!("row {}", row + 1), rng)?;
         for (a, &(c, _)) in cols.iter().enumerate() {
-            beta[(row, c)] = mean[a] + offset[a];
+            beta[(row, c)] = draw[a];
         }
         Ok(())
     }
@@ -186,10 +174,11 @@ impl AffineConjugate {
                 (target - fitted).powi(2)
             })
             .sum();
-        let (shape, scale) = (shape + 0.5 * samples.len() as f64, scale + 0.5 * squares);
-        let gamma = Gamma::new(shape, 1.0 / scale)
-            .map_err(|e| format!("{e} (shape {shape}, scale {scale})"))?;
-        Ok(1.0 / gamma.sample(rng))
+        inverse_gamma(
+            shape + 0.5 * samples.len() as f64,
+            scale + 0.5 * squares,
+            rng,
+        )
     }
 }
 

@@ -2,13 +2,14 @@
 //! `sysid-pmcmc`, with exact conjugate parameter steps for `lgss` and `nlbench`.
 
 use rand::RngExt;
-use rand_distr::{Distribution, Gamma, Normal, StandardNormal};
+use rand_distr::{Distribution, Normal, StandardNormal};
 use sysid_kalman::{KalmanWorkspace, LinearGaussianModel, Record};
+use sysid_pmcmc::conjugate::{gaussian_from_precision, inverse_gamma};
 use sysid_pmcmc::{ModelFamily, ParameterStep, Prior, ScalarPrior, Support};
 use sysid_smc::{Rng, Series, stream};
 
 use crate::{LinearGaussianSmc, Nlbench, NlbenchParams};
-use nalgebra::{Matrix3, Vector3, dmatrix};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3, dmatrix};
 
 /// The scalar linear Gaussian family with `theta = (phi, q, r)`.
 ///
@@ -162,13 +163,6 @@ impl LgssConjugate {
             ),
         }
     }
-}
-
-/// A draw from `IG(shape, scale)` as the reciprocal of a `Gamma(shape, rate = scale)`.
-fn inverse_gamma(shape: f64, scale: f64, rng: &mut Rng) -> Result<f64, String> {
-    let gamma = Gamma::new(shape, 1.0 / scale)
-        .map_err(|e| format!("{e} (shape {shape}, scale {scale})"))?;
-    Ok(1.0 / gamma.sample(rng))
 }
 
 impl ParameterStep<LgssFamily> for LgssConjugate {
@@ -375,26 +369,6 @@ impl NlbenchConjugate {
     }
 }
 
-/// A draw from `N(mean, P^{-1})` for a symmetric positive definite precision `P`.
-fn gaussian_from_precision(
-    precision: Matrix3<f64>,
-    rhs: Vector3<f64>,
-    rng: &mut Rng,
-) -> Result<Vector3<f64>, String> {
-    let chol = precision
-        .cholesky()
-        .ok_or("the conditional precision of (a, b, c) is not positive definite")?;
-    let mean = chol.solve(&rhs);
-    let eps = Vector3::from_fn(|_, _| StandardNormal.sample(rng));
-    // P = L L': L^{-T} eps has covariance P^{-1}
-    let offset = chol
-        .l()
-        .transpose()
-        .solve_upper_triangular(&eps)
-        .ok_or("a singular Cholesky factor")?;
-    Ok(mean + offset)
-}
-
 impl ParameterStep<NlbenchFamily> for NlbenchConjugate {
     fn update(
         &mut self,
@@ -437,7 +411,14 @@ impl ParameterStep<NlbenchFamily> for NlbenchConjugate {
             gram += z * z.transpose();
             cross += z * x[t + 1];
         }
-        let abc = gaussian_from_precision(precision + gram / q, rhs + cross / q, rng)?;
+        let precision = precision + gram / q;
+        let abc = gaussian_from_precision(
+            DMatrix::from_column_slice(3, 3, precision.as_slice()),
+            &DVector::from_column_slice((rhs + cross / q).as_slice()),
+            "(a, b, c)",
+            rng,
+        )?;
+        let abc = Vector3::new(abc[0], abc[1], abc[2]);
         theta[..3].copy_from_slice(abc.as_slice());
         if let Some([(aq, bq), _]) = noise {
             let sq: f64 = (0..x.len() - 1)

@@ -23,6 +23,7 @@
 //! Schön et al. (seed 001), Bayesian identification.
 
 mod chain;
+pub mod conjugate;
 pub mod diagnostics;
 mod error;
 mod family;

@@ -211,7 +211,8 @@ impl CliError {
             ),
             CliError::Plot(e) => !matches!(
                 e,
-                sysid_plot::PlotError::Io { .. } | sysid_plot::PlotError::Draw { .. }
+                sysid_plot::PlotError::Output(sysid_output::OutputError::Io { .. })
+                    | sysid_plot::PlotError::Draw { .. }
             ),
             CliError::Subspace(e) => !matches!(e, SubspaceError::Numerical(_)),
             CliError::Em(e) => match e {
@@ -269,8 +270,7 @@ impl From<sysid_output::OutputError> for CliError {
 impl From<sysid_plot::PlotError> for CliError {
     fn from(e: sysid_plot::PlotError) -> CliError {
         match e {
-            sysid_plot::PlotError::Io { path, source } => CliError::Io { path, source },
-            sysid_plot::PlotError::WouldOverwrite { path } => CliError::WouldOverwrite { path },
+            sysid_plot::PlotError::Output(e) => CliError::from(e),
             other => CliError::Plot(other),
         }
     }

@@ -161,7 +161,8 @@ pub fn read_model_file(path: &Path) -> Result<ModelFile, CliError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let spec: ModelSpec = serde_json::from_str(&text).map_err(|e| json_error(path, "model", &e))?;
+    let spec: ModelSpec =
+        serde_json::from_str(&text).map_err(|e| not_a_linear_model(path, &text, &e))?;
     let model = spec.build().map_err(|source| CliError::Model {
         path: path.to_path_buf(),
         source,
@@ -171,9 +172,9 @@ pub fn read_model_file(path: &Path) -> Result<ModelFile, CliError> {
         model.m(),
         model.p(),
     )
-    .map_err(|message| CliError::ModelEntry {
+    .map_err(|e| CliError::ModelEntry {
         path: path.to_path_buf(),
-        message: format!("metadata: {message}"),
+        message: format!("metadata: {e}"),
     })?;
     Ok(ModelFile {
         model,
@@ -181,6 +182,33 @@ pub fn read_model_file(path: &Path) -> Result<ModelFile, CliError> {
         initial: spec.initial,
         trend,
     })
+}
+
+/// The error for a file that is not a linear model file: what it is instead, when it
+/// is an estimate another command wrote or a nonlinear model file, with the command
+/// that reads it; else the JSON error.
+fn not_a_linear_model(path: &Path, text: &str, error: &serde_json::Error) -> CliError {
+    let json = serde_json::from_str::<serde_json::Value>(text).ok();
+    let system = json
+        .as_ref()
+        .and_then(|v| v.get("system"))
+        .and_then(|s| s.as_str());
+    let message = match system {
+        Some(system) => format!(
+            "a `sysid fit {system}` estimate (JSON), not a linear model file: fit again with \
+             --out FILE.toml for a model file, which pf, psmooth, pmmh, pgas and simulate \
+             --model read"
+        ),
+        None if json.is_none() && text.contains("[parameters]") => {
+            "a nonlinear model file (TOML) without the .toml extension: rename it to .toml"
+                .to_string()
+        }
+        None => return json_error(path, "model", error),
+    };
+    CliError::ModelEntry {
+        path: path.to_path_buf(),
+        message,
+    }
 }
 
 /// Parses and validates the text of a model file; errors name `path`.

@@ -295,3 +295,76 @@ fn fit_affine_on_a_linear_model_file_lands_near_exact_em() {
         e.r[0][0]
     );
 }
+
+/// One output per class, accepted everywhere: `fit nlbench --out fit.toml` writes the
+/// built-in nlbench model file at the estimates (the JSON estimate's values), which
+/// `pf --model` reads; the JSON estimate given to `pf` says what it is and what to do.
+#[test]
+fn a_fit_nlbench_model_file_is_read_by_pf_and_its_json_estimate_says_what_it_is() {
+    let dir = scratch_dir();
+    let (data, _) = nlbench_data(&dir, 200, 5);
+    let (json, toml) = (dir.join("fit.json"), dir.join("fit.toml"));
+    for out in [&json, &toml] {
+        let run = sysid(&[
+            "fit",
+            "nlbench",
+            "--data",
+            s(&data),
+            "--method",
+            "em",
+            "--max-iter",
+            "3",
+            "--particles",
+            "40",
+            "--out",
+            s(out),
+        ]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    let estimate: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let file = sysid::modelfile::ModelFile::read(&toml).unwrap();
+    let names = file.free_names();
+    let values = file.free_values();
+    for name in ["a", "b", "c", "d", "q", "r"] {
+        let k = names.iter().position(|n| n == name).unwrap();
+        assert_eq!(values[k], estimate[name].as_f64().unwrap(), "{name}");
+    }
+    let pf = sysid(&[
+        "pf",
+        "--model",
+        s(&toml),
+        "--data",
+        s(&data),
+        "--particles",
+        "200",
+        "--json",
+    ]);
+    assert!(
+        pf.status.success(),
+        "{}",
+        String::from_utf8_lossy(&pf.stderr)
+    );
+    let refused = sysid(&["pf", "--model", s(&json), "--data", s(&data)]);
+    assert_one_line_error(
+        &refused,
+        &["`sysid fit nlbench` estimate", "--out FILE.toml"],
+    );
+    // a linear affine fit cannot be written as a model file: refused before the work
+    let start = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/ar1_start.json");
+    let linear = sysid(&[
+        "fit",
+        "affine",
+        "--init",
+        s(&start),
+        "--data",
+        s(&data),
+        "--out",
+        s(&dir.join("x.toml")),
+    ]);
+    assert_one_line_error(&linear, &["--out", "name it .json"]);
+}

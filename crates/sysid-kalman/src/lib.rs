@@ -65,6 +65,7 @@ mod simulate;
 mod smoother;
 mod spec;
 mod stats;
+mod trend;
 
 pub use data::Record;
 pub use error::{KalmanError, Result};
@@ -79,6 +80,7 @@ pub use simulate::Simulation;
 pub use smoother::SmootherOutput;
 pub use spec::{Detrend, Metadata, ModelSpec, ParameterCovariance};
 pub use stats::SufficientStatistics;
+pub use trend::{Trend, TrendError, TrendKind};
 
 /// Log-likelihood of a data set of independent records sharing one model: the sum of
 /// the records' log-likelihoods.

@@ -234,7 +234,7 @@ impl Figure {
 
     /// Writes `<dir>/<stem>.svg` and `<dir>/<stem>.png` and returns their paths. An
     /// existing file is replaced only when `overwrite`; otherwise
-    /// [`PlotError::WouldOverwrite`] is returned before anything is written.
+    /// [`sysid_output::OutputError::WouldOverwrite`] is returned before anything is written.
     pub fn write(
         &self,
         dir: &Path,
@@ -244,7 +244,7 @@ impl Figure {
         let svg_path = dir.join(format!("{stem}.svg"));
         let png_path = dir.join(format!("{stem}.png"));
         if !overwrite && let Some(path) = [&svg_path, &png_path].into_iter().find(|p| p.exists()) {
-            return Err(PlotError::WouldOverwrite { path: path.clone() });
+            return Err(sysid_output::OutputError::WouldOverwrite { path: path.clone() }.into());
         }
         let svg = self.to_svg()?;
         sysid_output::write_atomically(&svg_path, overwrite, |file| {

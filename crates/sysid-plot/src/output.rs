@@ -8,30 +8,10 @@ use thiserror::Error;
 /// Why a figure or an output file could not be written.
 #[derive(Debug, Error)]
 pub enum PlotError {
-    /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The operating system's error.
-        source: std::io::Error,
-    },
-    /// The target exists and replacing it was not asked for.
-    #[error("{path}: refusing to overwrite an existing file (use --force)")]
-    WouldOverwrite {
-        /// The existing file.
-        path: PathBuf,
-    },
-    /// The target exists and is not a regular file (a directory, a device, a fifo, or
-    /// a symbolic link such as `/dev/stdout`): it is never replaced (the atomic rename
-    /// would put a regular file in its place).
-    #[error(
-        "{path}: not a regular file (a directory, device, fifo or symbolic link); give a file name"
-    )]
-    NotAFile {
-        /// The path.
-        path: PathBuf,
-    },
+    /// Writing a file failed, or the target may not be replaced (it exists and
+    /// replacing it was not asked for, or it is not a regular file).
+    #[error("{0}")]
+    Output(#[from] OutputError),
     /// A panel has no finite point to draw.
     #[error("panel {panel:?}: no finite point to draw")]
     NoData {
@@ -70,14 +50,4 @@ pub enum PlotError {
         /// The drawing library's message.
         message: String,
     },
-}
-
-impl From<OutputError> for PlotError {
-    fn from(e: OutputError) -> PlotError {
-        match e {
-            OutputError::Io { path, source } => PlotError::Io { path, source },
-            OutputError::WouldOverwrite { path } => PlotError::WouldOverwrite { path },
-            OutputError::NotAFile { path } => PlotError::NotAFile { path },
-        }
-    }
 }

@@ -5,10 +5,6 @@ pub mod demo;
 pub mod detrend;
 mod filter_trust;
 pub mod fit;
-pub mod fit_affine;
-pub mod fit_model;
-pub mod fit_wiener;
-pub mod fix;
 pub mod forecast;
 pub mod loglik;
 pub mod n4sid;
@@ -62,7 +58,7 @@ impl DataArgs {
                     stored.model.p()
                 },
             )?;
-            trend.remove(&mut file);
+            detrend::remove(trend, &mut file);
         }
         Ok(file)
     }

@@ -26,12 +26,19 @@
 
 mod ecm;
 mod mstep;
+mod pipeline;
 mod quasi_newton;
 mod spec;
 mod squarem;
 mod uncertainty;
 
 pub use mstep::m_step;
+pub use pipeline::{
+    AUTO_MAX_COORDINATES, Acceleration, CheckedLinearFitOptions, EmFailure, FitStatus, Fix,
+    FixValue, InformationCriteria, LinearFit, LinearFitError, LinearFitOptions, LinearFitWarning,
+    MAX_ORDER, Matrix, OrderChoice, OrderRow, OrderTable, Selection, Signals, SingularPart, Start,
+    Switch, ValidationFit, basis_for_output_matrix, transform_state,
+};
 pub use quasi_newton::{QuasiNewtonOptions, QuasiNewtonOutcome, coordinate_count, maximise_loglik};
 pub use squarem::SquaremLinearEm;
 pub use uncertainty::{ParameterEstimate, Uncertainty, UncertaintyError, standard_errors};

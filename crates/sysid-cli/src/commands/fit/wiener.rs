@@ -8,8 +8,8 @@
 //! the piecewise-linear outputs), and the estimate is reported in the canonical form
 //! of `WienerModel` (companion `A`, minimum-phase side of `Q`).
 
-use super::fit::Options;
-use super::particle::series_of;
+use super::options::Options;
+use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::write_output;
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
@@ -47,7 +47,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         return Err(bad("--iters", "must be at least 1"));
     }
     let file = o.data.read()?;
-    super::check_column_counts(&file, 0, 2)?;
+    crate::commands::check_column_counts(&file, 0, 2)?;
     let context = o.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let outputs: Vec<f64> = file.record.y.as_slice().to_vec();
@@ -169,7 +169,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             )
         },
     );
-    super::interrupted(
+    crate::commands::interrupted(
         &result.termination,
         std::iter::once(o.out.clone()).chain(o.trace.clone()),
     )

@@ -11,8 +11,8 @@
 //! Particle EM runs a fixed number of iterations (`--max-iter`, alias `--iters`); the
 //! E-step's log-likelihood is a particle estimate, so decreases are counted, not errors.
 
-use super::fit::Options;
-use super::particle::series_of;
+use super::options::Options;
+use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::{DataFile, read_model, write_output};
 use std::path::Path;
@@ -140,12 +140,19 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
     .check()
     .map_err(|e| bad("--max-iter", e.to_string()))?;
     let chosen = choose(o, nlbench)?;
+    if matches!(chosen, Chosen::Linear(..)) && crate::commands::nonlinear::is_model_file(&o.out) {
+        return Err(bad(
+            "--out",
+            "a linear model is written as a JSON model file (name it .json); `sysid fit lti` \
+             fits it exactly",
+        ));
+    }
     let file = o.data.read()?;
     let outputs = match &chosen {
         Chosen::Nlbench(_) => 1,
         Chosen::Linear(model, _) => model.output_dim(),
     };
-    super::check_column_counts(&file, 0, outputs)?;
+    crate::commands::check_column_counts(&file, 0, outputs)?;
     let job = Job { o, file, options };
     let estimated = o
         .estimate_noise
@@ -306,13 +313,25 @@ trait ParamNames {
     fn names(&self, params: &AffineParams) -> Vec<String>;
     fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError>;
 
+    /// The estimate as a nonlinear model file, where the class has one (written for
+    /// an output named `.toml`).
+    fn model_file(&self, _params: &AffineParams) -> Option<sysid::modelfile::ModelFile> {
+        None
+    }
+
     /// The output file's text: the model, with `summary` (how it was fitted) where the
-    /// format has room for it.
+    /// format has room for it; a model file for an output named `.toml`.
     fn model_text(
         &self,
         params: &AffineParams,
         summary: &serde_json::Value,
+        out: &Path,
     ) -> Result<String, CliError> {
+        if crate::commands::nonlinear::is_model_file(out)
+            && let Some(file) = self.model_file(params)
+        {
+            return Ok(file.to_toml(&super::toml_metadata::metadata_lines(summary)));
+        }
         let mut json = self.model_json(params)?;
         // A linear model file stays a plain model file (readable by every command);
         // the nlbench result records how it was obtained.
@@ -345,15 +364,34 @@ impl ParamNames for ExprAffine {
         &self,
         params: &AffineParams,
         summary: &serde_json::Value,
+        _out: &Path,
     ) -> Result<String, CliError> {
         let fitted = self.file().with_values(&self.theta(params));
-        Ok(fitted.to_toml(&super::fit_model::metadata_lines(summary)))
+        Ok(fitted.to_toml(&super::toml_metadata::metadata_lines(summary)))
     }
 }
 
 impl ParamNames for NlbenchAffine {
     fn names(&self, _: &AffineParams) -> Vec<String> {
         ["a", "b", "c", "d", "q", "r"].map(String::from).to_vec()
+    }
+
+    /// The built-in nlbench model file (`sysid pf --system nlbench`'s) at the
+    /// estimates, which every command for model files reads.
+    fn model_file(&self, params: &AffineParams) -> Option<sysid::modelfile::ModelFile> {
+        let builtin = crate::commands::nonlinear::system("nlbench").ok()?;
+        let p = NlbenchAffine::nlbench_params(params);
+        let value = |name: &str| match name {
+            "a" => Some(p.a),
+            "b" => Some(p.b),
+            "c" => Some(p.c),
+            "d" => Some(p.d),
+            "q" => Some(p.q),
+            "r" => Some(p.r),
+            _ => None,
+        };
+        let theta: Option<Vec<f64>> = builtin.free_names().iter().map(|n| value(n)).collect();
+        Some(builtin.with_values(&theta?))
     }
 
     fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError> {
@@ -453,7 +491,7 @@ where
         "seed": o.seed, "loglik_estimate": result.loglik,
         "likelihood_decreases": result.decreases, "interrupted": stopped,
     });
-    let text = model.model_text(&result.estimate, &summary)?;
+    let text = model.model_text(&result.estimate, &summary, &o.out)?;
     write_output(&o.out, o.force, &text)?;
     if let Some(path) = &o.trace {
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
@@ -482,7 +520,7 @@ where
             )
         },
     );
-    super::interrupted(
+    crate::commands::interrupted(
         &result.termination,
         std::iter::once(o.out.clone()).chain(o.trace.clone()),
     )
@@ -572,7 +610,10 @@ where
             "settled": settled, "largest_change_last_quarters": change},
         "warnings": fit.warnings,
     });
-    let mut outputs = vec![(o.out.clone(), model.model_text(&fit.estimate, &summary)?)];
+    let mut outputs = vec![(
+        o.out.clone(),
+        model.model_text(&fit.estimate, &summary, &o.out)?,
+    )];
     if let Some(path) = &o.trace {
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
         for (k, (p, l)) in fit.refine_trace.iter().zip(&fit.refine_loglik).enumerate() {

@@ -4,8 +4,9 @@
 //! (seed 001; rejection FFBSi with `--particles` paths, analytic gradients). The
 //! estimate is written as a model file that every nonlinear command reads.
 
-use super::fit::Options;
-use super::particle::series_of;
+use super::options::Options;
+use super::toml_metadata::metadata_lines;
+use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::{fmt, write_output};
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
@@ -20,33 +21,13 @@ fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     }
 }
 
-/// `key = value` lines for a model file's `[metadata]`: the scalar entries of
-/// `summary` (numbers, strings, booleans; nested values are left out).
-pub fn metadata_lines(summary: &serde_json::Value) -> Vec<(String, String)> {
-    let mut lines = vec![("fitted_by".to_string(), "\"sysid fit\"".to_string())];
-    if let Some(map) = summary.as_object() {
-        for (k, v) in map {
-            let text = match v {
-                serde_json::Value::Number(n) => n.as_f64().filter(|x| x.is_finite()).map(fmt),
-                serde_json::Value::String(s) => Some(format!("{s:?}")),
-                serde_json::Value::Bool(b) => Some(b.to_string()),
-                _ => None,
-            };
-            if let Some(text) = text {
-                lines.push((k.clone(), text));
-            }
-        }
-    }
-    lines
-}
-
 /// `sysid fit --model m.toml`.
 pub fn run(o: &Options) -> Result<(), CliError> {
     let path = o
         .model
         .as_deref()
         .ok_or_else(|| bad("--model", "give a model file"))?;
-    let model = super::nonlinear::read(path)?;
+    let model = crate::commands::nonlinear::read(path)?;
     if model.free_names().is_empty() {
         return Err(bad(
             "--model",
@@ -60,7 +41,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .data
         .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
     match model.affine() {
-        Some(affine) => super::fit_affine::run_file(o, &affine, file),
+        Some(affine) => super::affine::run_file(o, &affine, file),
         None => fit_gradient(o, &model, file),
     }
 }
@@ -205,7 +186,7 @@ fn fit_gradient(
             o.out.display()
         )
     });
-    super::interrupted(
+    crate::commands::interrupted(
         &result.termination,
         outputs.into_iter().map(|(path, _)| path),
     )

@@ -374,3 +374,70 @@ fn the_guide_library_example_gives_the_command_s_log_likelihood_to_the_bit() {
         Some(expected.to_bits())
     );
 }
+
+/// `sysid pf` and the library's filter with `FilterDiagnostics` give the same
+/// log-likelihood, repeats, sd and warnings, to the bit.
+#[test]
+fn pf_and_its_diagnostics_equal_the_library() {
+    use sysid::smc::{FilterDiagnostics, FilterOptions, ParticleFilter, Resampling, Series};
+    let dir = scratch_dir();
+    let path = dir.join("d.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "nlbench",
+        "--steps",
+        "300",
+        "--seed",
+        "3",
+        "--out",
+        s(&path),
+    ]));
+    let run = sysid(&[
+        "pf",
+        "--system",
+        "nlbench",
+        "--data",
+        s(&path),
+        "--particles",
+        "300",
+        "--seed",
+        "5",
+        "--json",
+    ]);
+    assert_ok(&run);
+    let summary: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let data = read_csv(&path, None);
+    let y: Vec<f64> = data.record.y.iter().copied().collect();
+    let series = Series::new(&y, 1).unwrap();
+    let mut pf = ParticleFilter::new(FilterOptions {
+        particles: 300,
+        resampling: Resampling::Systematic,
+        ess_threshold: 1.0,
+        ..FilterOptions::default()
+    })
+    .unwrap();
+    let model = sysid::models::Nlbench::truth();
+    let loglik = pf.run(&model, &series, 5).unwrap().loglik;
+    let checked = FilterDiagnostics::diagnose(&model, &series, &pf, loglik, 5, 9, || {});
+    assert_eq!(
+        summary["loglik"].as_f64().map(f64::to_bits),
+        Some(loglik.to_bits())
+    );
+    let d = &summary["diagnostics"];
+    assert_eq!(
+        d["loglik_sd"].as_f64().map(f64::to_bits),
+        checked.loglik_sd.map(f64::to_bits)
+    );
+    let repeats: Vec<f64> = d["repeat_logliks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(repeats, checked.repeat_logliks);
+    assert_eq!(d["min_ess"].as_f64(), checked.min_ess.map(|(e, _)| e));
+    // the data file's times are the row numbers here, so the texts agree too
+    let warnings: Vec<String> = checked.warnings.iter().map(ToString::to_string).collect();
+    assert_eq!(summary["warnings"], serde_json::json!(warnings));
+}

@@ -25,6 +25,7 @@
 
 mod busy;
 pub mod conditional;
+mod diagnostics;
 mod error;
 pub mod filter;
 mod guided;
@@ -44,6 +45,7 @@ mod vexp;
 pub mod weights;
 
 pub use conditional::{ConditionalSmc, CsmcKernel, CsmcSummary};
+pub use diagnostics::{FilterDiagnostics, FilterWarning, LOST_FRACTION, LOST_STEPS, SD_LIMIT};
 pub use error::SmcError;
 pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
 pub use guided::GuidedFilter;

@@ -19,11 +19,13 @@
 mod error;
 mod input_fit;
 mod n4sid;
+mod warning;
 mod weighting;
 
 pub use error::SubspaceError;
 pub use n4sid::{
-    Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, OrderScore, auto_order, n4sid,
-    spectral_radius,
+    AUTO_MAX_ORDER, Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, OrderScore,
+    auto_order, n4sid, spectral_radius,
 };
+pub use warning::SubspaceWarning;
 pub use weighting::Weighting;

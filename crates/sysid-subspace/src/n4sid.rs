@@ -527,7 +527,7 @@ fn identify(record: &Record, options: &N4sidOptions) -> Result<N4sidResult, Subs
 }
 
 /// The largest order [`Order::Auto`] considers.
-const AUTO_MAX_ORDER: usize = 20;
+pub const AUTO_MAX_ORDER: usize = 20;
 
 /// The record with its means removed, and the means.
 struct Centred {

@@ -2,9 +2,7 @@ use crate::DataArgs;
 use crate::error::CliError;
 use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
-use sysid::subspace::{
-    Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, Weighting, n4sid,
-};
+use sysid::subspace::{Criterion, Focus, InputMethod, N4sidOptions, Order, Weighting, n4sid};
 
 /// Options of `sysid n4sid`.
 #[derive(clap::Args, Debug)]
@@ -109,43 +107,6 @@ pub fn subspace_options(
     })
 }
 
-/// Warnings a user needs about a subspace result.
-pub fn subspace_warnings(result: &N4sidResult, focus_simulation: bool) -> Vec<String> {
-    let mut warnings = Vec::new();
-    if result.spectral_radius >= 1.0 {
-        warnings.push(format!(
-            "the identified A is unstable (spectral radius {:.4}): simulations of this model \
-             diverge; rerun with --stable to enforce a stable A, or try another order",
-            result.spectral_radius
-        ));
-    }
-    if result.stabilised {
-        warnings.push(format!(
-            "A was unstable and was re-estimated to be stable (--stable; spectral radius now \
-             {:.4}); the stabilised A is biased",
-            result.spectral_radius
-        ));
-    }
-    if focus_simulation
-        && result.input_method == InputMethod::StateEquations
-        && result.model.m() > 0
-    {
-        warnings.push(
-            "--focus simulation was not possible (A is unstable, so its simulation diverges): \
-             B and D come from the state equations"
-                .into(),
-        );
-    }
-    if result.collinear_inputs {
-        warnings.push(
-            "the inputs are collinear (one is constant or a combination of others): B and D \
-             are the minimum-norm solution; drop the redundant input column"
-                .into(),
-        );
-    }
-    warnings
-}
-
 pub fn run(o: &Options) -> Result<(), CliError> {
     let options = subspace_options(
         parse_order(&o.order)?,
@@ -174,7 +135,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     crate::files::write_model(&o.out, o.force, &spec)?;
-    let warnings = subspace_warnings(&result, options.focus == Focus::Simulation);
+    let warnings: Vec<String> = result
+        .warnings(&options)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
     let scores: Vec<serde_json::Value> = result
         .order_scores
         .iter()

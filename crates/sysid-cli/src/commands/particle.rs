@@ -310,11 +310,11 @@ fn filter_with<M: FilterModel + Sync>(
         crate::say(&s.to_string());
     } else {
         let sd = trust
-            .loglik_sd
+            .loglik_sd()
             .map(|sd| format!(", sd {} over {} runs", fmt(sd), a.repeats + 1))
             .unwrap_or_default();
         let ess = trust
-            .min_ess
+            .min_ess()
             .map(|(e, t)| format!("; smallest ESS {e:.1} at step {}", t + 1))
             .unwrap_or_default();
         crate::say(&format!(
@@ -446,7 +446,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         crate::say(&s.to_string());
     } else {
         let sd = trust
-            .loglik_sd
+            .loglik_sd()
             .map(|sd| format!(" (sd {} over {} runs)", fmt(sd), c.repeats + 1))
             .unwrap_or_default();
         crate::say(&format!(

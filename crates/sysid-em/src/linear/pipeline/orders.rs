@@ -116,6 +116,16 @@ pub(super) fn fit_range(
         .min_by(|a, b| a.score(select).total_cmp(&b.score(select)))
         .ok_or(LinearFitError::NoOrder { from, to })?
         .order;
+    // an end of the range the range could have gone past: its top below the cap, or
+    // a bottom above 1
+    let at_top = chosen == to && to < super::MAX_ORDER;
+    if from < to && (at_top || (chosen == from && from > 1)) {
+        warnings.push(LinearFitWarning::OrderAtEdge {
+            order: chosen,
+            from,
+            to,
+        });
+    }
     let mut fit =
         super::fit_prepared(training, held_out.as_ref(), options, Some(chosen), observer)?;
     warnings.append(&mut fit.warnings);
@@ -126,4 +136,60 @@ pub(super) fn fit_range(
         rows,
     });
     Ok(fit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{LinearFit, LinearFitOptions, OrderChoice, Selection, Signals};
+    use super::LinearFitWarning;
+    use nalgebra::{DMatrix, dmatrix};
+    use rand::{SeedableRng, rngs::Xoshiro256PlusPlus};
+    use sysid_kalman::LinearGaussianModel;
+
+    /// The warnings of an order range fitted to a second-order system.
+    fn warnings(from: usize, to: usize) -> (usize, Vec<LinearFitWarning>) {
+        let truth = LinearGaussianModel::builder(
+            dmatrix![1.2, -0.5; 1.0, 0.0],
+            dmatrix![1.0, 0.3],
+            DMatrix::identity(2, 2) * 0.01,
+            dmatrix![0.01],
+        )
+        .b(dmatrix![1.0; 0.0])
+        .build()
+        .unwrap();
+        let u = DMatrix::from_fn(1, 600, |_, t| ((t * 7919) % 13) as f64 / 6.0 - 1.0);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
+        let record = truth.simulate(&u, &mut rng).unwrap().record;
+        let options = LinearFitOptions {
+            order: OrderChoice::Range {
+                from,
+                to,
+                select: Selection::Bic,
+            },
+            polish: super::Switch::Off,
+            ..LinearFitOptions::default()
+        };
+        let fit =
+            LinearFit::run(&Signals::new(record), &options.check().unwrap(), &mut ()).unwrap();
+        (fit.order_table.unwrap().chosen, fit.warnings)
+    }
+
+    #[test]
+    fn an_order_chosen_at_an_end_the_range_could_pass_is_flagged() {
+        let edge = |w: &LinearFitWarning| matches!(w, LinearFitWarning::OrderAtEdge { .. });
+        let (chosen, w) = warnings(1, 2);
+        assert_eq!(chosen, 2);
+        assert!(w.iter().any(edge), "{w:?}");
+        assert!(
+            w[0].to_string().contains("top of the range 1..2"),
+            "{}",
+            w[0]
+        );
+        let (chosen, w) = warnings(2, 3);
+        assert_eq!(chosen, 2);
+        assert!(w.iter().any(edge), "a bottom above 1: {w:?}");
+        let (chosen, w) = warnings(1, 4);
+        assert_eq!(chosen, 2);
+        assert!(!w.iter().any(edge), "{w:?}");
+    }
 }

@@ -42,6 +42,16 @@ pub enum LinearFitWarning {
         /// Why.
         reason: String,
     },
+    /// The order chosen from a range is at an end of it that the range could have
+    /// gone past (its top, or a bottom above 1).
+    OrderAtEdge {
+        /// The order chosen.
+        order: usize,
+        /// The range's first order.
+        from: usize,
+        /// Its last.
+        to: usize,
+    },
     /// An order of a range could not be fitted.
     OrderFailed {
         /// The order.
@@ -107,6 +117,14 @@ impl std::fmt::Display for LinearFitWarning {
             LinearFitWarning::NoStandardErrors { reason } => {
                 write!(f, "no standard errors: {reason}")
             }
+            LinearFitWarning::OrderAtEdge { order, from, to } => write!(
+                f,
+                "order {order} was chosen at the {} of the range {from}..{to}: a {} order may be \
+                 better; widen the range (orders 1 to {})",
+                if order == to { "top" } else { "bottom" },
+                if order == to { "higher" } else { "lower" },
+                super::MAX_ORDER
+            ),
             LinearFitWarning::OrderFailed { order, reason } => {
                 write!(f, "order {order} failed: {reason}")
             }

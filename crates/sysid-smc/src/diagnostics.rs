@@ -1,0 +1,313 @@
+//! How far to trust a particle filter's result: the Monte Carlo standard deviation of
+//! its log-likelihood estimate, from independent repeats, and the smallest effective
+//! sample size, with warnings when either says the estimate is unreliable.
+//!
+//! # Rules
+//! - The log-likelihood sd is the sample sd of the estimate over the run and
+//!   `repeats` more filters with independent streams. Above 1.5 nats the estimate is
+//!   too noisy to compare models or to drive PMMH (Doucet, Pitt, Deligiannidis and
+//!   Kohn 2015 recommend about 1 to 1.7); the warning says how many particles would
+//!   bring it to 1 (the variance falls as 1/M).
+//! - The filter lost the state when, for [`LOST_STEPS`] steps in a row, the weights
+//!   sat on a handful of particles: an effective sample size below [`LOST_FRACTION`]
+//!   of M (between 1.5 and 5). A single such step is an outlying observation.
+//!
+//! # Example
+//! ```
+//! use rand_distr::{Distribution, StandardNormal};
+//! use sysid_smc::{FilterDiagnostics, FilterOptions, ParticleFilter, Series};
+//! use sysid_smc::{InitialSampler, ObservationDensity, StateSpace, TransitionSampler};
+//! /// A random walk seen in unit noise.
+//! struct Walk;
+//! impl StateSpace for Walk { fn state_dim(&self) -> usize { 1 } }
+//! impl InitialSampler for Walk {
+//!     fn sample_initial<R: rand::Rng + ?Sized>(&self, x: &mut [f64], rng: &mut R) {
+//!         x[0] = StandardNormal.sample(rng);
+//!     }
+//! }
+//! impl TransitionSampler for Walk {
+//!     fn sample_transition<R: rand::Rng + ?Sized>(
+//!         &self, _t: usize, x: &[f64], _u: &[f64], next: &mut [f64], rng: &mut R,
+//!     ) {
+//!         let w: f64 = StandardNormal.sample(rng);
+//!         next[0] = x[0] + 0.1 * w;
+//!     }
+//! }
+//! impl ObservationDensity for Walk {
+//!     fn log_observation(&self, _t: usize, x: &[f64], _u: &[f64], y: &[f64]) -> f64 {
+//!         -0.5 * (y[0] - x[0]).powi(2) - 0.5 * (2.0 * std::f64::consts::PI).ln()
+//!     }
+//! }
+//! let y: Vec<f64> = (0..100).map(|t| (t as f64 * 0.1).sin()).collect();
+//! let series = Series::new(&y, 1)?;
+//! let options = FilterOptions { particles: 200, ..FilterOptions::default() };
+//! let mut pf = ParticleFilter::new(options)?;
+//! let run = pf.run(&Walk, &series, 7)?;
+//! let checked = FilterDiagnostics::diagnose(&Walk, &series, &pf, run.loglik, 7, 5, || {});
+//! assert!(checked.loglik_sd.unwrap() < 1.5 && checked.warnings.is_empty());
+//! # Ok::<(), sysid_smc::SmcError>(())
+//! ```
+
+use crate::{FilterModel, FilterOptions, ParticleFilter, Series, stream};
+
+/// An ESS below this fraction of the particles (and below 5) means the filter lost the
+/// state at that step.
+pub const LOST_FRACTION: f64 = 0.01;
+
+/// The log-likelihood sd above which the estimate is flagged (nats).
+pub const SD_LIMIT: f64 = 1.5;
+
+/// Runs further apart than this (nats) are not Monte Carlo scatter but lost states.
+const CATASTROPHIC_SPREAD: f64 = 20.0;
+
+/// Steps in a row with a collapsed ESS that make a lost state (one such step is an
+/// outlying observation the filter recovers from).
+pub const LOST_STEPS: usize = 3;
+
+/// The ESS below which a step counts as collapsed.
+fn lost_below(particles: usize) -> f64 {
+    (LOST_FRACTION * particles as f64).clamp(1.5, 5.0)
+}
+
+/// The first run of at least [`LOST_STEPS`] consecutive collapsed steps: its first
+/// step and its length.
+fn lost_stretch(ess: &[f64], particles: usize) -> Option<(usize, usize)> {
+    let below = lost_below(particles);
+    let mut t = 0;
+    while t < ess.len() {
+        if ess[t] < below {
+            let length = ess[t..].iter().take_while(|&&e| e < below).count();
+            if length >= LOST_STEPS {
+                return Some((t, length));
+            }
+            t += length;
+        } else {
+            t += 1;
+        }
+    }
+    None
+}
+
+/// Why a particle filter's result should not be trusted.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum FilterWarning {
+    /// The weights sat on a handful of particles for several steps in a row.
+    LostState {
+        /// The first such step (0-based).
+        first: usize,
+        /// How many steps in a row.
+        length: usize,
+        /// The effective sample size below which a step counts.
+        below: f64,
+        /// The particles.
+        particles: usize,
+    },
+    /// The log-likelihood estimate's Monte Carlo sd is above [`SD_LIMIT`].
+    NoisyLoglik {
+        /// The sd over the runs.
+        sd: f64,
+        /// The runs (the filter and its repeats).
+        runs: usize,
+        /// The smallest and largest estimate.
+        range: (f64, f64),
+        /// The particles.
+        particles: usize,
+    },
+    /// A repeat of the filter failed.
+    RepeatFailed {
+        /// Its stream.
+        stream: u64,
+        /// Why.
+        reason: String,
+    },
+    /// The repeats could not be set up.
+    RepeatsNotRun {
+        /// Why.
+        reason: String,
+    },
+}
+
+impl FilterWarning {
+    /// The warning with the steps named by `time_label` (a data file's times, say)
+    /// instead of their numbers alone.
+    pub fn describe(&self, time_label: &dyn Fn(usize) -> String) -> String {
+        match self {
+            FilterWarning::LostState {
+                first,
+                length,
+                below,
+                particles,
+            } => format!(
+                "the filter lost the state from step {} (time {}) for {length} steps: its \
+                 weights sat on fewer than {below:.1} effective particles of {particles}; the \
+                 log-likelihood and the states there are unreliable (more particles, or a \
+                 model whose noise covers the data)",
+                first + 1,
+                time_label(*first),
+            ),
+            FilterWarning::NoisyLoglik {
+                sd,
+                runs,
+                range: (low, high),
+                particles,
+            } => {
+                let advice = if high - low > CATASTROPHIC_SPREAD {
+                    // a few runs lost the state: the 1/M rule does not apply to such a
+                    // spread
+                    format!(
+                        "the runs range from {low:.1} to {high:.1}, so some lost the state: \
+                         use many more particles and check again"
+                    )
+                } else {
+                    let needed = (*particles as f64 * sd * sd).ceil();
+                    format!("about {needed:.0} particles would bring it to 1")
+                };
+                format!(
+                    "the log-likelihood estimate has a Monte Carlo sd of {sd:.2} nats over \
+                     {runs} runs (above {SD_LIMIT}): {advice}"
+                )
+            }
+            FilterWarning::RepeatFailed { stream, reason } => format!(
+                "a repeat of the filter (stream {stream}) failed: {reason}; the \
+                 log-likelihood estimate is unreliable"
+            ),
+            FilterWarning::RepeatsNotRun { reason } => {
+                format!("the repeats could not run: {reason}")
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for FilterWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.describe(&|t| (t + 1).to_string()))
+    }
+}
+
+/// The diagnostics of one filter run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FilterDiagnostics {
+    /// Sample sd of the log-likelihood estimates (`None` without repeats, or when one
+    /// failed).
+    pub loglik_sd: Option<f64>,
+    /// The log-likelihood estimates of the repeats (the run's not included).
+    pub repeat_logliks: Vec<f64>,
+    /// Smallest ESS of the run and the step (0-based) where it happened.
+    pub min_ess: Option<(f64, usize)>,
+    /// Reasons not to trust the estimate.
+    pub warnings: Vec<FilterWarning>,
+}
+
+impl FilterDiagnostics {
+    /// Diagnoses the last run of `filter` (log-likelihood `loglik`): its ESS, and
+    /// `repeats` more filters with the same options on the streams `1..=repeats`
+    /// derived from `seed` (the run's own seed; the results do not depend on the
+    /// threads). `on_repeat` is called after each repeat (a progress bar).
+    pub fn diagnose<M: FilterModel + Sync>(
+        model: &M,
+        series: &Series<'_>,
+        filter: &ParticleFilter,
+        loglik: f64,
+        seed: u64,
+        repeats: usize,
+        mut on_repeat: impl FnMut(),
+    ) -> FilterDiagnostics {
+        let (options, ess) = (filter.options(), filter.ess());
+        let particles = options.particles;
+        let mut warnings = Vec::new();
+        let min_ess = ess
+            .iter()
+            .copied()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(t, e)| (e, t));
+        if let Some((first, length)) = lost_stretch(ess, particles) {
+            warnings.push(FilterWarning::LostState {
+                first,
+                length,
+                below: lost_below(particles),
+                particles,
+            });
+        }
+        let mut estimates = Vec::with_capacity(repeats);
+        if repeats > 0 {
+            let quiet = FilterOptions {
+                record_summaries: false,
+                ..options.clone()
+            };
+            match ParticleFilter::new(quiet) {
+                Ok(mut repeat) => {
+                    for k in 1..=repeats as u64 {
+                        let repeat_seed: u64 = rand::RngExt::random(&mut stream(seed, k));
+                        let run = repeat.run(model, series, repeat_seed);
+                        on_repeat();
+                        match run {
+                            Ok(s) => estimates.push(s.loglik),
+                            Err(e) => {
+                                warnings.push(FilterWarning::RepeatFailed {
+                                    stream: k,
+                                    reason: e.to_string(),
+                                });
+                                break;
+                            }
+                        }
+                    }
+                }
+                Err(e) => warnings.push(FilterWarning::RepeatsNotRun {
+                    reason: e.to_string(),
+                }),
+            }
+        }
+        let all: Vec<f64> = std::iter::once(loglik)
+            .chain(estimates.iter().copied())
+            .collect();
+        let loglik_sd = (!estimates.is_empty() && estimates.len() == repeats).then(|| {
+            let mean = all.iter().sum::<f64>() / all.len() as f64;
+            (all.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (all.len() - 1) as f64)
+                .sqrt()
+        });
+        if let Some(sd) = loglik_sd
+            && sd > SD_LIMIT
+        {
+            let range = all
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                    (l.min(v), h.max(v))
+                });
+            warnings.push(FilterWarning::NoisyLoglik {
+                sd,
+                runs: repeats + 1,
+                range,
+                particles,
+            });
+        }
+        FilterDiagnostics {
+            loglik_sd,
+            repeat_logliks: estimates,
+            min_ess,
+            warnings,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::lost_stretch;
+
+    #[test]
+    fn a_lost_state_is_three_collapsed_steps_in_a_row() {
+        let ok = [50.0; 10];
+        assert_eq!(lost_stretch(&ok, 100), None);
+        let mut one = ok;
+        one[4] = 1.0;
+        assert_eq!(
+            lost_stretch(&one, 100),
+            None,
+            "one outlier is not a lost state"
+        );
+        let mut three = ok;
+        three[2..5].copy_from_slice(&[1.0, 1.2, 1.1]);
+        assert_eq!(lost_stretch(&three, 100), Some((2, 3)));
+    }
+}

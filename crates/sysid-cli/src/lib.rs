@@ -133,7 +133,7 @@ enum Command {
         after_help = "Examples:\n  sysid fit lti --data d.csv --order 8 --out fit.json --trace trace.csv\n  sysid fit lti --data d.csv --init start.json --fix D=0 --diag R --out fit.json\n  sysid fit nlbench --data nl.csv --max-iter 200 --particles 50 --out nl-fit.json\n  sysid fit nlbench --data nl.csv --method psaem --particles 15 --iters 2000 --estimate-noise=q --out nl-fit.json
   sysid fit lti --data d.csv --order 8 --min-variance 1e-8 --out fit.json\n  sysid fit wiener --data w.csv --max-iter 100 --out wiener.json"
     )]
-    Fit(Box<commands::fit::Options>),
+    Fit(Box<commands::fit::FitCommand>),
     /// Print the exact log-likelihood of data under a model (square-root Kalman filter).
     #[command(
         after_help = "Examples:\n  sysid loglik --model true.json --data d.csv\n  sysid loglik --model fit.json --data d.csv --json\n  sysid loglik --model fit.json --data other.csv --initial diffuse"
@@ -297,7 +297,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Some(Command::Demo(options)) => commands::demo::run(&options),
         Some(Command::Simulate(options)) => commands::simulate::run(&options),
         Some(Command::N4sid(options)) => commands::n4sid::run(&options),
-        Some(Command::Fit(options)) => commands::fit::run(&options),
+        Some(Command::Fit(options)) => commands::fit::run(*options),
         Some(Command::Predict(options)) => commands::predict::run(&options),
         Some(Command::Compare(options)) => commands::compare::run(&options),
         Some(Command::Resid(options)) => commands::resid::run(&options),
@@ -318,6 +318,46 @@ fn run(cli: Cli) -> Result<(), CliError> {
             })
         }
     }
+}
+
+/// For an option that `sysid fit`'s model class (or model-file form) does not take:
+/// which fit forms do take it, read from the command line's own definition.
+fn fit_option_elsewhere(args: &[std::ffi::OsString], e: &clap::Error) -> Option<String> {
+    use clap::CommandFactory;
+    use clap::error::{ContextKind, ContextValue};
+    if e.kind() != clap::error::ErrorKind::UnknownArgument {
+        return None;
+    }
+    let words: Vec<&str> = args.iter().filter_map(|a| a.to_str()).collect();
+    let at = words.iter().position(|w| *w == "fit")?;
+    let Some(ContextValue::String(given)) = e.get(ContextKind::InvalidArg) else {
+        return None;
+    };
+    let flag = given.split('=').next()?.strip_prefix("--")?;
+    let cli = Cli::command();
+    let fit = cli.find_subcommand("fit")?;
+    let takes = |c: &clap::Command| c.get_arguments().any(|a| a.get_long() == Some(flag));
+    let mut users: Vec<String> = fit
+        .get_subcommands()
+        .filter(|c| takes(c))
+        .map(|c| format!("fit {}", c.get_name()))
+        .collect();
+    if takes(fit) {
+        users.push("fit --model".into());
+    }
+    let class = words
+        .get(at + 1)
+        .filter(|w| fit.find_subcommand(w).is_some());
+    let what = match class {
+        Some(c) => format!("fit {c}"),
+        None => "a model file (fit --model)".into(),
+    };
+    (!users.is_empty()).then(|| {
+        format!(
+            "--{flag}: does not apply to {what}; it is an option of {}",
+            users.join(", ")
+        )
+    })
 }
 
 /// Prints `--help` and `--version` as clap does; any other parse error as one line
@@ -355,9 +395,16 @@ fn command_line_error(e: &clap::Error) -> ExitCode {
 /// Runs the command line on `args` (the program name first) and returns the exit code:
 /// 0 on success, 2 for bad input, 1 for other failures, with a one-line error on stderr.
 pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
-    let cli = match Cli::try_parse_from(args) {
+    let args: Vec<std::ffi::OsString> = args.into_iter().collect();
+    let cli = match Cli::try_parse_from(&args) {
         Ok(cli) => cli,
-        Err(e) => return command_line_error(&e),
+        Err(e) => {
+            if let Some(message) = fit_option_elsewhere(&args, &e) {
+                eprintln!("sysid: error: {message}");
+                return ExitCode::from(error::EXIT_BAD_INPUT);
+            }
+            return command_line_error(&e);
+        }
     };
     let strict = cli.strict;
     progress::watch_interrupts();

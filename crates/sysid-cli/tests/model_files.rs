@@ -504,3 +504,70 @@ fn ctrl_c_keeps_what_a_long_run_has() {
     assert_eq!(out.status.code(), Some(130));
     assert!(!states.exists());
 }
+
+/// `sysid fit CLASS --help` lists the options that class takes, and no other class's.
+#[test]
+fn each_fit_class_help_lists_only_its_own_options() {
+    let options = |args: &[&str]| -> Vec<String> {
+        let out = sysid(args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| l.trim_start().strip_prefix("--"))
+            .map(|l| l.split([' ', '[', '=']).next().unwrap().to_string())
+            .collect()
+    };
+    let has = |list: &[String], flags: &[&str], yes: bool, class: &str| {
+        for flag in flags {
+            assert_eq!(list.iter().any(|f| f == flag), yes, "fit {class}: --{flag}");
+        }
+    };
+    let particle = [
+        "particles",
+        "smoother",
+        "method",
+        "starts",
+        "estimate-noise",
+        "system",
+    ];
+    let linear = [
+        "order", "fix", "diag", "detrend", "split", "polish", "tol-nats", "full-r",
+    ];
+    let lti = options(&["fit", "lti", "--help"]);
+    has(&lti, &linear, true, "lti");
+    has(&lti, &particle, false, "lti");
+    has(&lti, &["model", "seed"], false, "lti");
+    let nlbench = options(&["fit", "nlbench", "--help"]);
+    has(
+        &nlbench,
+        &[
+            "particles",
+            "smoother",
+            "method",
+            "starts",
+            "estimate-noise",
+            "init",
+            "seed",
+        ],
+        true,
+        "nlbench",
+    );
+    has(&nlbench, &linear, false, "nlbench");
+    has(&nlbench, &["system", "model"], false, "nlbench");
+    let affine = options(&["fit", "affine", "--help"]);
+    has(&affine, &["system", "init", "particles"], true, "affine");
+    has(&affine, &linear, false, "affine");
+    let wiener = options(&["fit", "wiener", "--help"]);
+    has(&wiener, &["particles", "seed", "max-iter"], true, "wiener");
+    has(
+        &wiener,
+        &["method", "smoother", "starts", "init", "system"],
+        false,
+        "wiener",
+    );
+    has(&wiener, &linear, false, "wiener");
+}

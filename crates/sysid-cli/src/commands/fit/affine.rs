@@ -194,13 +194,6 @@ pub fn run_file(o: &Options, affine: &ExprAffine, file: DataFile) -> Result<(), 
     if o.particles == 0 {
         return Err(bad("--particles", "must be at least 1"));
     }
-    if o.estimate_noise.is_some() {
-        return Err(bad(
-            "--estimate-noise",
-            "a model file says which noise variances are estimated (a parameter with \
-             fixed = true is held)",
-        ));
-    }
     let options = EmOptions {
         max_iterations: o.max_iter,
         tol: 0.0,

@@ -1,62 +1,56 @@
-//! The options of `sysid fit` and which model classes use each.
+//! What a `sysid fit` class's command reads: one value filled from the class's
+//! arguments ([`super::args`]), the options of other classes at their defaults.
 
+use super::args::{
+    AffineArgs, FitClass, FitCommand, LtiArgs, NlbenchArgs, OutputArgs, ParticleEmArgs, WienerArgs,
+};
 use crate::DataArgs;
-use crate::error::CliError;
 use std::path::PathBuf;
 
-/// Options of `sysid fit`.
-#[derive(clap::Args, Debug, Clone)]
+/// The options of a fit, whatever its class (those of other classes at their
+/// defaults: the command line refuses them).
+#[derive(Debug, Clone)]
 pub struct Options {
     /// Model class: `lti` (linear Gaussian state space, exact EM), `nlbench` (the
     /// seed-000 benchmark, particle EM), `affine` (particle EM for an affine model:
     /// `--system nlbench`, or a linear model given by `--init FILE`) or `wiener`
     /// (blind Wiener identification from y1, y2 by gradient EM, seed 001). Leave it
     /// out with `--model`.
-    #[arg(required_unless_present = "model")]
     pub kind: Option<String>,
     /// A nonlinear model file (`.toml`, docs/model-format.md) whose free parameters
     /// are estimated from their values in the file: closed-form particle EM when the
     /// equations are affine in them (`--method robust` or `em`), gradient EM otherwise.
     /// The fitted model is written as a model file.
-    #[arg(long, conflicts_with = "kind")]
     pub model: Option<PathBuf>,
-    #[command(flatten)]
     pub data: DataArgs,
     /// Model order (required with `--init n4sid`; checked against a model file), or
     /// a range `FROM..TO` (linear EM): every order is fitted, a table of
     /// log-likelihood, parameters, AIC, BIC and validation fit is printed, and the one
     /// `--select` chooses is written. BIC and AIC count the identifiable parameters (a
     /// black-box model's, less the n^2 of a change of state basis).
-    #[arg(long)]
     pub order: Option<String>,
     /// Starting model: `n4sid` (subspace fit; its S is set to zero) or a model file.
     /// For `nlbench`: `a,b,c,d` or `a,b,c,d,q,r` (default: the nominal values
     /// 0.5,25,8,0.05,0.01,0.1).
-    #[arg(long, default_value = "n4sid")]
     pub init: String,
     /// `fit affine`: the affine system (`nlbench`); without it `--init` names a linear
     /// model file.
-    #[arg(long)]
     pub system: Option<String>,
     /// Hold a matrix fixed: `NAME` at its initial value, or `NAME=VALUE` with a number
     /// (broadcast) or a JSON matrix. Names: A B C D h Q R S mu P1. Repeatable.
-    #[arg(long, value_name = "NAME[=VALUE]")]
     pub fix: Vec<String>,
     /// Estimate these covariances as diagonal (`Q`, `R`, comma separated); a full
     /// initial value is replaced by its diagonal.
-    #[arg(long, value_delimiter = ',')]
     pub diag: Vec<String>,
     /// Linear EM: bound the free noise variances below (`Q, R >= V I`, in the data's
     /// units; 0 = plain maximum likelihood). Use it when the likelihood climbs towards
     /// a singular `Q` or `R`, where EM is no longer numerically monotone.
-    #[arg(long, value_name = "V", default_value_t = 0.0)]
     pub min_variance: f64,
     /// Linear EM: bound the output noise below relative to each output's sample
     /// variance, `R >= REL diag(var y)`, e.g. 1e-4 for a noise standard deviation of
     /// at least 1 % of each output's. Use it when an output's noise variance heads to
     /// zero (the likelihood then grows without bound). 0 (the default) = plain maximum
     /// likelihood.
-    #[arg(long, value_name = "REL", default_value_t = 0.0)]
     pub min_output_noise: f64,
     /// Linear EM: estimate R as a full covariance. By default R is diagonal when there
     /// are several outputs (independent sensor noise, MARSS's default): with a full R
@@ -64,16 +58,13 @@ pub struct Options {
     /// R that makes one combination of the outputs exactly predictable, a degenerate
     /// optimum that predicts each output worse (the DaISy glass furnace: 61 % against
     /// 80 % one-step prediction fit).
-    #[arg(long)]
     pub full_r: bool,
     /// `--init n4sid`: enforce a stable A in the subspace start (see `sysid n4sid
     /// --stable`).
-    #[arg(long)]
     pub stable: bool,
     /// Linear EM: also estimate the output offset h (by default h is held at the
     /// start's value: for `--init n4sid`, the record's mean output less the
     /// steady-state response to its mean input).
-    #[arg(long)]
     pub offset: bool,
     /// Linear EM: also estimate the initial state's mean mu and covariance P1 of this
     /// record. By default they are held at the start's values during EM (N4SID: mu = 0,
@@ -81,7 +72,6 @@ pub struct Options {
     /// new record's initial state instead ("initial": "stationary" for a stable fitted
     /// A, "diffuse" otherwise), so that it can be run on another record of the same
     /// process.
-    #[arg(long)]
     pub estimate_initial: bool,
     /// Linear EM: the training record's initial state: `model` (the start's: N4SID's,
     /// or the `--init` file's), `stationary` (the stationary law of the start's state
@@ -89,24 +79,20 @@ pub struct Options {
     /// likelihood, as statsmodels does for unit-root models). Whatever the choice, the
     /// model written describes a new record's initial state as `stationary` when its A
     /// is stable and `diffuse` otherwise (unless mu or P1 were estimated or fixed).
-    #[arg(long, default_value = "model")]
     pub initial: String,
     /// Linear EM: `squarem` (the default) accelerates EM by squared extrapolation
     /// (Varadhan and Roland 2008; monotone like EM, three E-steps per cycle, often tens
     /// of times fewer E-steps to the optimum); `none` runs plain EM.
-    #[arg(long, default_value = "squarem", value_parser = ["squarem", "none"])]
     pub accelerate: String,
     /// Linear EM: after EM, maximise the exact log-likelihood by BFGS (quasi-Newton,
     /// superlinear near the maximum, where EM crawls): `auto` (the default) when the
     /// free parameters number at most 20 (structural models), `on`, `off`.
-    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
     pub polish: String,
     /// Linear EM: standard errors of the free parameters from the observed information
     /// (the negative Hessian of the exact log-likelihood in the model's entries, by
     /// central differences; a covariance by its upper triangle), with 95 % confidence
     /// intervals: `auto` (the default) for at most 20 free parameters, `on`, `off`.
     /// Black-box models (free A and C) are not identifiable and get none.
-    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
     pub std_errors: String,
     /// Linear EM: `mean` removes each signal's mean before the fit and folds the means
     /// into the written model's offset h (and mu), so that it describes, predicts and
@@ -116,29 +102,23 @@ pub struct Options {
     /// remove them from a record at its times and return outputs in the original units
     /// (states are those of the detrended signals); `none` (the default) fits the
     /// signals as they are.
-    #[arg(long, default_value = "none")]
     pub detrend: String,
     /// Linear EM: fit on the first FRACTION of the rows (after --range) and report the
     /// fitted model's simulation and one-step prediction fits on the rest (as `sysid
     /// compare` computes them).
-    #[arg(long)]
     pub split: Option<f64>,
     /// Linear EM with `--order FROM..TO`: the criterion that chooses the order written,
     /// `bic` (the default), `aic`, or `validation` (the best simulation fit on the rows
     /// held out by --split).
-    #[arg(long, default_value = "bic", value_parser = ["bic", "aic", "validation"])]
     pub select: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
-    #[arg(long, visible_alias = "iters", default_value_t = 500)]
     pub max_iter: usize,
     /// Particle EM: particles M of the filter (and paths of `ffbsi-reject`).
-    #[arg(long, default_value_t = 100)]
     pub particles: usize,
     /// Particle EM: E-step smoother, `tanizaki` (seed 000's, O(M^2) per step) or
     /// `ffbsi-reject` (O(M) expected per step when the transition density is not too
     /// peaked).
-    #[arg(long, default_value = "tanizaki")]
     pub smoother: String,
     /// Particle fits: `robust` (the default: several starts around --init explored
     /// with the noise estimated from an inflated value, the best by a 1000-particle
@@ -146,14 +126,11 @@ pub struct Options {
     /// docs/particle-em.md), `em` (one run of particle EM from --init, seed 000's
     /// algorithm) or `psaem` (stochastic-approximation EM with a conditional particle
     /// filter with ancestor sampling, Lindsten 2013; 15 particles are usually enough).
-    #[arg(long, default_value = "robust")]
     pub method: String,
     /// Particle fits with `--method robust`: the number of starts (--init and
     /// perturbations of it, each coefficient times U[0.5, 1.5]).
-    #[arg(long, default_value_t = 8)]
     pub starts: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Particle fits: which noise covariances are estimated: `--estimate-noise` (or
     /// `=both`) both, `=q` the process noise only, `=r` the output noise only, `=none`
@@ -161,106 +138,145 @@ pub struct Options {
     /// explores with both estimated anyway and holds a noise the user keeps only in its
     /// refinement), none for `em` and `psaem`. At a small process noise (nlbench's
     /// q = 0.01), estimating q is what lets the particle kernel move the trajectory.
-    #[arg(
-        long,
-        value_name = "WHICH",
-        num_args = 0..=1,
-        require_equals = true,
-        default_missing_value = "both",
-        value_parser = ["q", "r", "both", "none"]
-    )]
     pub estimate_noise: Option<String>,
     /// Linear EM: stop when the estimated distance to the maximum of the
     /// log-likelihood (Aitken's extrapolation of the last three values) is below this
     /// many nats. A run that ends at --max-iter instead says so, with the estimate.
-    #[arg(long, value_name = "NATS", default_value_t = 1e-4)]
     pub tol_nats: f64,
     /// Stop when the relative log-likelihood change of an iteration is below this
     /// (default: 1e-6, except for linear EM, which uses --tol-nats unless this is
     /// given).
-    #[arg(long)]
     pub tol: Option<f64>,
     /// Where to write the fitted model (JSON).
-    #[arg(long)]
     pub out: PathBuf,
     /// Also write the log-likelihood trace (CSV: iteration, loglik).
-    #[arg(long)]
     pub trace: Option<PathBuf>,
     /// Replace existing output files.
-    #[arg(long)]
     pub force: bool,
     /// Print `{loglik, iterations, termination, seconds}` as JSON.
-    #[arg(long)]
     pub json: bool,
 }
 
-/// Each option that not every model class uses: whether it was given (differs from
-/// its default) and the classes it applies to (`model` is `--model FILE.toml`).
-fn class_options(o: &Options) -> [(&'static str, bool, &'static [&'static str]); 26] {
-    const LTI: &[&str] = &["lti"];
-    const PARTICLE: &[&str] = &["nlbench", "affine", "wiener", "model"];
-    const PARTICLE_EM: &[&str] = &["nlbench", "affine", "model"];
-    [
-        ("--order", o.order.is_some(), LTI),
-        ("--init", o.init != "n4sid", &["lti", "nlbench", "affine"]),
-        ("--system", o.system.is_some(), &["affine"]),
-        ("--fix", !o.fix.is_empty(), LTI),
-        ("--diag", !o.diag.is_empty(), LTI),
-        ("--min-variance", o.min_variance != 0.0, LTI),
-        ("--min-output-noise", o.min_output_noise != 0.0, LTI),
-        ("--full-r", o.full_r, LTI),
-        ("--stable", o.stable, LTI),
-        ("--offset", o.offset, LTI),
-        ("--estimate-initial", o.estimate_initial, LTI),
-        ("--initial", o.initial != "model", LTI),
-        ("--accelerate", o.accelerate != "squarem", LTI),
-        ("--polish", o.polish != "auto", LTI),
-        ("--std-errors", o.std_errors != "auto", LTI),
-        ("--detrend", o.detrend != "none", LTI),
-        ("--split", o.split.is_some(), LTI),
-        ("--select", o.select != "bic", LTI),
-        ("--tol-nats", o.tol_nats != 1e-4, LTI),
-        ("--tol", o.tol.is_some(), LTI),
-        ("--particles", o.particles != 100, PARTICLE),
-        ("--seed", o.seed != 1, PARTICLE),
-        ("--smoother", o.smoother != "tanizaki", PARTICLE_EM),
-        ("--method", o.method != "robust", PARTICLE_EM),
-        ("--starts", o.starts != 8, PARTICLE_EM),
-        (
-            "--estimate-noise",
-            o.estimate_noise.is_some(),
-            &["nlbench", "affine"],
-        ),
-    ]
-}
-
-/// Refuses an option the model class does not use (it used to be ignored in silence).
-pub(super) fn refuse_other_class_options(o: &Options, class: &str) -> Result<(), CliError> {
-    for (option, given, classes) in class_options(o) {
-        if given && !classes.contains(&class) {
-            let users: Vec<String> = classes
-                .iter()
-                .map(|c| {
-                    if *c == "model" {
-                        "fit --model".to_string()
-                    } else {
-                        format!("fit {c}")
-                    }
-                })
-                .collect();
-            let what = if class == "model" {
-                "a model file (fit --model)".to_string()
-            } else {
-                format!("fit {class}")
-            };
-            return Err(CliError::BadOption {
-                option,
-                message: format!(
-                    "does not apply to {what}; it is an option of {}",
-                    users.join(", ")
-                ),
-            });
+impl Options {
+    /// The defaults of every class, for these data and outputs.
+    fn new(kind: Option<&str>, data: DataArgs, output: OutputArgs) -> Options {
+        Options {
+            kind: kind.map(String::from),
+            model: None,
+            data,
+            order: None,
+            init: "n4sid".into(),
+            system: None,
+            fix: Vec::new(),
+            diag: Vec::new(),
+            min_variance: 0.0,
+            min_output_noise: 0.0,
+            full_r: false,
+            stable: false,
+            offset: false,
+            estimate_initial: false,
+            initial: "model".into(),
+            accelerate: "squarem".into(),
+            polish: "auto".into(),
+            std_errors: "auto".into(),
+            detrend: "none".into(),
+            split: None,
+            select: "bic".into(),
+            max_iter: 500,
+            particles: 100,
+            smoother: "tanizaki".into(),
+            method: "robust".into(),
+            starts: 8,
+            seed: 1,
+            estimate_noise: None,
+            tol_nats: 1e-4,
+            tol: None,
+            out: output.out,
+            trace: output.trace,
+            force: output.force,
+            json: output.json,
         }
     }
-    Ok(())
+
+    fn with_particle_em(mut self, em: ParticleEmArgs) -> Options {
+        self.particles = em.particles;
+        self.smoother = em.smoother;
+        self.method = em.method;
+        self.starts = em.starts;
+        self
+    }
+
+    fn nlbench(kind: &str, a: NlbenchArgs) -> Options {
+        let mut o = Options::new(Some(kind), a.data, a.output).with_particle_em(a.em);
+        o.init = a.init;
+        o.max_iter = a.max_iter;
+        o.seed = a.seed;
+        o.estimate_noise = a.estimate_noise;
+        o
+    }
+
+    /// The options of a class's command.
+    pub fn of_class(class: FitClass) -> Options {
+        match class {
+            FitClass::Lti(a) => Options::lti(*a),
+            FitClass::Nlbench(a) => Options::nlbench("nlbench", *a),
+            FitClass::Affine(a) => {
+                let AffineArgs { system, nlbench } = *a;
+                Options {
+                    system,
+                    ..Options::nlbench("affine", nlbench)
+                }
+            }
+            FitClass::Wiener(a) => {
+                let WienerArgs {
+                    data,
+                    max_iter,
+                    particles,
+                    seed,
+                    output,
+                } = *a;
+                Options {
+                    max_iter,
+                    particles,
+                    seed,
+                    ..Options::new(Some("wiener"), data, output)
+                }
+            }
+        }
+    }
+
+    fn lti(a: LtiArgs) -> Options {
+        Options {
+            order: a.order,
+            init: a.init,
+            fix: a.fix,
+            diag: a.diag,
+            min_variance: a.min_variance,
+            min_output_noise: a.min_output_noise,
+            full_r: a.full_r,
+            stable: a.stable,
+            offset: a.offset,
+            estimate_initial: a.estimate_initial,
+            initial: a.initial,
+            accelerate: a.accelerate,
+            polish: a.polish,
+            std_errors: a.std_errors,
+            detrend: a.detrend,
+            split: a.split,
+            select: a.select,
+            max_iter: a.max_iter,
+            tol_nats: a.tol_nats,
+            tol: a.tol,
+            ..Options::new(Some("lti"), a.data, a.output)
+        }
+    }
+
+    /// The options of `fit --model m.toml`; `None` without its data or outputs.
+    pub fn of_model_file(a: FitCommand) -> Option<Options> {
+        let mut o = Options::new(None, a.data?, a.output?).with_particle_em(a.em);
+        o.model = a.model;
+        o.max_iter = a.max_iter;
+        o.seed = a.seed;
+        Some(o)
+    }
 }

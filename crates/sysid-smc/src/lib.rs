@@ -58,8 +58,8 @@ pub use normals::{add_scaled_normals, fill_standard_normals};
 pub use resample::Resampling;
 pub use series::Series;
 pub use smoother::{
-    AdditiveFunctional, Ffbsi, FfbsiReject, Genealogy, Smoother, SmootherStats, Tanizaki,
-    Trajectories,
+    AdditiveFunctional, EmSmoother, Ffbsi, FfbsiReject, Genealogy, Smoother, SmootherStats,
+    Tanizaki, Trajectories,
 };
 pub use streams::{Rng, stream};
 pub use vexp::{exp_shifted_sum, exp_shifted_sum_portable};

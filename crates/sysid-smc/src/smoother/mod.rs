@@ -32,6 +32,7 @@
 
 mod alias;
 mod backward;
+mod em_choice;
 mod exact;
 mod genealogy;
 mod nearest;
@@ -41,6 +42,7 @@ mod rounds;
 mod window;
 
 pub use backward::PATH_BLOCK;
+pub use em_choice::EmSmoother;
 pub use paths::{AdditiveFunctional, Trajectories};
 
 use crate::model::{StateSpace, TransitionBound, TransitionDensity};

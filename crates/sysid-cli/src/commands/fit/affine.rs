@@ -21,14 +21,11 @@ use sysid::em::affine::{
     StartStatus, StepSizes, describe, fit_robust_until,
 };
 use sysid::em::linear::Covariance;
-use sysid::em::{EmAlgorithm, EmObserver, EmOptions, IterationInfo, Termination, run_em};
+use sysid::em::{EmAlgorithm, EmObserver, IterationInfo, Termination, run_em};
 use sysid::kalman::ModelSpec;
 use sysid::modelfile::ExprAffine;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
-use sysid::smc::{
-    AdditiveFunctional, FfbsiReject, History, Series, SmcError, Smoother, SmootherStats, Tanizaki,
-    Trajectories, TransitionBound,
-};
+use sysid::smc::{EmSmoother, Smoother};
 
 /// The affine model chosen on the command line, with its starting parameters.
 enum Chosen {
@@ -129,16 +126,7 @@ struct Job<'a> {
 
 /// `sysid fit nlbench` / `sysid fit affine`.
 pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
-    if o.particles == 0 {
-        return Err(bad("--particles", "must be at least 1"));
-    }
-    let options = EmOptions {
-        max_iterations: o.max_iter,
-        tol: 0.0,
-        ..EmOptions::default()
-    }
-    .check()
-    .map_err(|e| bad("--max-iter", e.to_string()))?;
+    let options = o.particle_em(1)?;
     let chosen = choose(o, nlbench)?;
     if matches!(chosen, Chosen::Linear(..)) && crate::commands::nonlinear::is_model_file(&o.out) {
         return Err(bad(
@@ -191,16 +179,7 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
 /// particle EM (`--method robust`, `em` or `psaem`); which noise variances are
 /// estimated is the file's choice.
 pub fn run_file(o: &Options, affine: &ExprAffine, file: DataFile) -> Result<(), CliError> {
-    if o.particles == 0 {
-        return Err(bad("--particles", "must be at least 1"));
-    }
-    let options = EmOptions {
-        max_iterations: o.max_iter,
-        tol: 0.0,
-        ..EmOptions::default()
-    }
-    .check()
-    .map_err(|e| bad("--max-iter", e.to_string()))?;
+    let options = o.particle_em(1)?;
     let start = affine
         .params(&affine.file().free_values())
         .map_err(|m| bad("--model", m))?;
@@ -249,56 +228,18 @@ where
     fit_with_smoother(job, model, start, spec, row, smoother)
 }
 
-/// The E-step smoother `--smoother` names.
-#[derive(Debug, Clone, Copy)]
-enum ChosenSmoother {
-    Tanizaki(Tanizaki),
-    FfbsiReject(FfbsiReject),
-}
-
 /// `--smoother tanizaki|ffbsi-reject` (rejection FFBSi draws `--particles` paths).
-fn chosen_smoother(o: &Options) -> Result<ChosenSmoother, CliError> {
-    match o.smoother.as_str() {
-        "tanizaki" => Ok(ChosenSmoother::Tanizaki(Tanizaki::default())),
-        "ffbsi-reject" => Ok(ChosenSmoother::FfbsiReject(FfbsiReject {
-            paths: o.particles,
-            max_trials: None,
-            parallel: false,
-        })),
-        other => Err(bad(
+fn chosen_smoother(o: &Options) -> Result<EmSmoother, CliError> {
+    EmSmoother::from_name(&o.smoother, o.particles).ok_or_else(|| {
+        bad(
             "--smoother",
-            format!("unknown smoother {other:?} (known: tanizaki, ffbsi-reject)"),
-        )),
-    }
-}
-
-impl<M: TransitionBound + Sync> Smoother<M> for ChosenSmoother {
-    fn trajectories(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-    ) -> Result<(Trajectories, SmootherStats), SmcError> {
-        match self {
-            ChosenSmoother::Tanizaki(s) => s.trajectories(model, history, data, seed),
-            ChosenSmoother::FfbsiReject(s) => s.trajectories(model, history, data, seed),
-        }
-    }
-
-    fn additive<F: AdditiveFunctional + ?Sized>(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-        functional: &mut F,
-    ) -> Result<SmootherStats, SmcError> {
-        match self {
-            ChosenSmoother::Tanizaki(s) => s.additive(model, history, data, seed, functional),
-            ChosenSmoother::FfbsiReject(s) => s.additive(model, history, data, seed, functional),
-        }
-    }
+            format!(
+                "unknown smoother {:?} (known: {})",
+                o.smoother,
+                EmSmoother::NAMES.join(", ")
+            ),
+        )
+    })
 }
 
 /// Names of the columns of the parameter trace and the output file's contents.

@@ -10,7 +10,7 @@ use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::{fmt, write_output};
 use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
-use sysid::em::{EmObserver, EmOptions, IterationInfo, Termination, run_em};
+use sysid::em::{EmObserver, IterationInfo, Termination, run_em};
 use sysid::modelfile::ModelFile;
 use sysid::smc::FfbsiReject;
 
@@ -80,16 +80,7 @@ fn fit_gradient(
             ));
         }
     };
-    if o.particles < 2 {
-        return Err(bad("--particles", "must be at least 2"));
-    }
-    let options = EmOptions {
-        max_iterations: o.max_iter,
-        tol: 0.0,
-        ..EmOptions::default()
-    }
-    .check()
-    .map_err(|e| bad("--max-iter", e.to_string()))?;
+    let options = o.particle_em(2)?;
     let context = o.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let gradient = model.gradient();

@@ -441,3 +441,85 @@ fn pf_and_its_diagnostics_equal_the_library() {
     let warnings: Vec<String> = checked.warnings.iter().map(ToString::to_string).collect();
     assert_eq!(summary["warnings"], serde_json::json!(warnings));
 }
+
+/// `sysid pmmh`'s summary and warnings are the library's `ChainReport` of the chains
+/// it wrote.
+#[test]
+fn pmmh_summary_and_warnings_are_the_library_report_of_its_chains() {
+    use sysid::pmcmc::{Chain, ChainReport};
+    let dir = scratch_dir();
+    let (data, chains_file) = (dir.join("d.csv"), dir.join("chains.json"));
+    assert_ok(&sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        "100",
+        "--seed",
+        "2",
+        "--out",
+        s(&data),
+    ]));
+    let run = sysid(&[
+        "pmmh",
+        "--system",
+        "lgss",
+        "--data",
+        s(&data),
+        "--iters",
+        "300",
+        "--chains",
+        "2",
+        "--particles",
+        "30",
+        "--out",
+        s(&chains_file),
+        "--json",
+    ]);
+    assert_ok(&run);
+    let summary: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&chains_file).unwrap()).unwrap();
+    let numbers = |v: &serde_json::Value| -> Vec<f64> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap_or(f64::NAN))
+            .collect()
+    };
+    let chains: Vec<Chain> = written["chains"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| Chain {
+            names: serde_json::from_value(c["names"].clone()).unwrap(),
+            burn_in: c["burn_in"].as_u64().unwrap() as usize,
+            samples: numbers(&c["samples"]),
+            log_likelihood: numbers(&c["log_likelihood"]),
+            log_prior: numbers(&c["log_prior"]),
+            accepted: serde_json::from_value(c["accepted"].clone()).unwrap(),
+            state_update_rate: None,
+            state_mean: None,
+            interrupted: false,
+        })
+        .collect();
+    let report = ChainReport::of(&chains);
+    assert_eq!(summary["acceptance"], serde_json::json!(report.acceptance));
+    let warnings: Vec<String> = report.warnings.iter().map(ToString::to_string).collect();
+    assert_eq!(summary["warnings"], serde_json::json!(warnings));
+    assert!(
+        !warnings.is_empty(),
+        "300 iterations of 2 chains leave few effective draws"
+    );
+    for (json, s) in summary["summary"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(&report.summary)
+    {
+        assert_eq!(json["name"], s.name.as_str());
+        assert_eq!(json["mean"].as_f64(), Some(s.mean));
+        assert_eq!(json["rhat"].as_f64(), Some(s.rhat));
+        assert_eq!(json["ess_bulk"].as_f64(), Some(s.ess_bulk));
+    }
+}

@@ -31,6 +31,7 @@ pub mod gibbs;
 mod observer;
 pub mod pmmh;
 pub mod prior;
+mod report;
 mod support;
 
 pub use chain::Chain;
@@ -46,5 +47,6 @@ pub use gibbs::{
 pub use observer::ChainObserver;
 pub use pmmh::{PmmhOptions, pmmh};
 pub use prior::{IndependentPrior, Prior, ScalarPrior};
+pub use report::{ACCEPTANCE_LIMIT, ChainReport, ChainWarning, ESS_LIMIT, RHAT_LIMIT};
 pub use support::Support;
 pub use sysid_smc::CsmcKernel;

@@ -19,8 +19,8 @@ use std::io::Write;
 use std::path::PathBuf;
 use sysid::models::{LgssConjugate, LgssFamily, NlbenchConjugate, NlbenchFamily};
 use sysid::pmcmc::{
-    Chain, CsmcKernel, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily,
-    PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
+    Chain, ChainReport, CsmcKernel, GibbsOptions, IndependentPrior, MetropolisWithinGibbs,
+    ModelFamily, PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, particle_gibbs_guided, pmmh,
 };
 use sysid::smc::Resampling;
 
@@ -640,17 +640,14 @@ fn finish(
     if let Some(path) = &a.out {
         write_chains(path, a.force, chains)?;
     }
-    let summary = summarise(chains);
-    let acceptance: Vec<f64> = chains.iter().map(Chain::acceptance_rate).collect();
+    let ChainReport {
+        summary,
+        acceptance,
+        min_state_update_rate: min_update_rate,
+        warnings,
+    } = ChainReport::of(chains);
+    let warnings: Vec<String> = warnings.iter().map(ToString::to_string).collect();
     let iterations = (a.iterations * chains.len()) as f64;
-    let mut min_update_rate = None;
-    for c in chains {
-        if let Some(rates) = &c.state_update_rate {
-            let low = rates.iter().copied().fold(f64::INFINITY, f64::min);
-            min_update_rate = Some(min_update_rate.map_or(low, |m: f64| m.min(low)));
-        }
-    }
-    let warnings = mixing_warnings(&summary, chains.len(), &acceptance, min_update_rate);
     for w in &warnings {
         crate::warn(w);
     }
@@ -733,68 +730,4 @@ fn write_chains(path: &std::path::Path, force: bool, chains: &[Chain]) -> Result
         }
     }
     w.commit()
-}
-
-/// R-hat above this says the chains have not mixed (Vehtari et al. 2021).
-const RHAT_LIMIT: f64 = 1.01;
-
-/// Fewer effective draws than this make the posterior summaries unreliable.
-const ESS_LIMIT: f64 = 400.0;
-
-/// PMMH acceptance below this: the chain barely moves.
-const ACCEPTANCE_LIMIT: f64 = 0.05;
-
-/// Warnings about chains whose summaries should not be trusted: draws that never
-/// changed, rank-normalised R-hat above 1.01 (several chains), bulk or tail effective
-/// sample size below 400 (Vehtari et al. 2021),
-/// PMMH acceptance below 0.05.
-fn mixing_warnings(
-    summary: &[sysid::pmcmc::ParameterSummary],
-    chains: usize,
-    acceptance: &[f64],
-    state_update_rate: Option<f64>,
-) -> Vec<String> {
-    let mut warnings = Vec::new();
-    let list = |pick: &dyn Fn(&sysid::pmcmc::ParameterSummary) -> Option<String>| {
-        summary
-            .iter()
-            .filter_map(pick)
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let high_rhat = list(&|s| (s.rhat > RHAT_LIMIT).then(|| format!("{} {:.3}", s.name, s.rhat)));
-    if chains >= 2 && !high_rhat.is_empty() {
-        warnings.push(format!(
-            "the chains have not mixed: R-hat above {RHAT_LIMIT} ({high_rhat}); run longer or \
-             tune the proposal before using the summaries"
-        ));
-    }
-    // no ESS for draws that exist: they never changed
-    let stuck = list(&|s| (s.ess_bulk.is_nan() && !s.mean.is_nan()).then(|| s.name.clone()));
-    if !stuck.is_empty() {
-        warnings.push(format!(
-            "the draws of {stuck} never changed: the sampler did not move them (a summary of \
-             one value)"
-        ));
-    }
-    let low_ess = list(&|s| {
-        let ess = s.ess_bulk.min(s.ess_tail);
-        (ess < ESS_LIMIT)
-            .then(|| format!("{} bulk {:.0}, tail {:.0}", s.name, s.ess_bulk, s.ess_tail))
-    });
-    if !low_ess.is_empty() {
-        warnings.push(format!(
-            "few effective draws: ESS below {ESS_LIMIT} ({low_ess}); the means and quantiles \
-             carry large Monte Carlo error"
-        ));
-    }
-    // PMMH only: particle Gibbs reports its state update rate instead
-    let lowest = acceptance.iter().copied().fold(f64::INFINITY, f64::min);
-    if state_update_rate.is_none() && lowest < ACCEPTANCE_LIMIT {
-        warnings.push(format!(
-            "acceptance {lowest:.3} below {ACCEPTANCE_LIMIT}: the chain barely moves (smaller \
-             proposal steps, or more particles for a less noisy likelihood estimate)"
-        ));
-    }
-    warnings
 }

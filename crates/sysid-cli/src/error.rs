@@ -18,6 +18,9 @@ pub enum CliError {
     },
     #[error("{path}: refusing to overwrite an existing file (use --force)")]
     WouldOverwrite { path: PathBuf },
+    /// An output whose folder does not exist (refused before any work).
+    #[error("{path}: the folder {folder} does not exist; create it first")]
+    NoFolder { path: PathBuf, folder: PathBuf },
     #[error("{path}: given for two outputs of this command; choose a file for each")]
     SameOutput { path: PathBuf },
     /// EM could not evaluate its start (e.g. a start with a singular `R` on

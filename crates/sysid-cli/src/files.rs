@@ -63,6 +63,25 @@ pub fn create_output(path: &Path, force: bool) -> Result<Output, CliError> {
     Ok(Output::File(PendingFile::create(path, force)?))
 }
 
+/// [`refuse_existing`] for outputs whose folder the command does not create: a folder
+/// that does not exist is refused too, before any work.
+pub fn check_outputs<'a>(
+    paths: impl IntoIterator<Item = &'a Path>,
+    force: bool,
+) -> Result<(), CliError> {
+    let paths: Vec<&Path> = paths.into_iter().collect();
+    for path in &paths {
+        let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
+        if let Some(folder) = folder.filter(|f| !f.is_dir()) {
+            return Err(CliError::NoFolder {
+                path: path.to_path_buf(),
+                folder: folder.to_path_buf(),
+            });
+        }
+    }
+    refuse_existing(paths, force)
+}
+
 /// Checks a command's outputs before any work: one file given for two outputs, an
 /// existing path that is not a regular file (a directory, device, fifo or symbolic
 /// link such as `/dev/stdout`), and, without `force`, an existing file are refused, so a refused command writes nothing (the final write checks

@@ -328,3 +328,66 @@ fn the_written_model_scores_its_training_record_as_em_did() {
     let text = String::from_utf8_lossy(&resid.stderr);
     assert!(!text.contains("warning"), "{text}");
 }
+
+/// `fit lti --order 1` on the lgss record: the polish walks along the free scale of the
+/// state (C against Q) and stops short. The warning names the cause and the remedy,
+/// and following it (--fix C=1) gives a converged fit with standard errors.
+#[test]
+fn a_one_state_model_s_free_scale_is_named_and_fixing_c_settles_it() {
+    let dir = scratch_dir();
+    let data = dir.join("lg.csv");
+    let ok = |out: &std::process::Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_str::<serde_json::Value>(String::from_utf8_lossy(&out.stdout).trim())
+            .unwrap()
+    };
+    ok(&sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        "500",
+        "--out",
+        s(&data),
+        "--json",
+    ]));
+    let free = ok(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--order",
+        "1",
+        "--out",
+        s(&dir.join("a.json")),
+        "--json",
+    ]));
+    let warnings = free["warnings"].to_string();
+    assert_eq!(free["termination"], "not_converged", "{free}");
+    assert!(warnings.contains("--fix C=1"), "{warnings}");
+    // a black-box model gets no standard errors by default, so no warning about them
+    assert!(!warnings.contains("no standard errors"), "{warnings}");
+    let fixed = ok(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--order",
+        "1",
+        "--fix",
+        "C=1",
+        "--out",
+        s(&dir.join("b.json")),
+        "--json",
+    ]));
+    assert_eq!(fixed["termination"], "converged", "{fixed}");
+    assert_eq!(fixed["warnings"], serde_json::json!([]));
+    assert_eq!(
+        fixed["parameters"].as_array().map(Vec::len),
+        Some(3),
+        "A, Q, R"
+    );
+}

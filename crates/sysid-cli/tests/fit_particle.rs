@@ -192,8 +192,13 @@ fn fit_particle_rejects_bad_options() {
     ]);
     assert_one_line_error(&affine, &["wiener"]);
     assert!(!out_file.exists(), "no output after a refused run");
-    // a failure that is not the input's fault (here: an unwritable output) exits 1
-    let unwritable = dir.join("no-such-folder").join("f.json");
+    // an output in a folder that does not exist is refused before the work, as bad
+    // input (exit 2); a failure that is not the input's fault (here: a folder where no
+    // file can be created, even by root) exits 1
+    let missing = dir.join("no-such-folder").join("f.json");
+    let out = sysid(&["fit", "nlbench", "--data", s(&data), "--out", s(&missing)]);
+    assert_one_line_error(&out, &["no-such-folder", "does not exist"]);
+    let unwritable = std::path::Path::new("/proc/sysid-fit-test.json");
     let out = sysid(&[
         "fit",
         "nlbench",
@@ -202,7 +207,7 @@ fn fit_particle_rejects_bad_options() {
         "--iters",
         "1",
         "--out",
-        s(&unwritable),
+        s(unwritable),
     ]);
     assert_eq!(
         out.status.code(),

@@ -517,3 +517,80 @@ fn a_truth_that_does_not_cover_the_states_is_refused() {
     assert!(!figures.exists() || entries(&figures).is_empty());
     assert_ok(&plot(&long));
 }
+
+/// An output in a folder that does not exist is refused before any work, and the other
+/// outputs are not written (fit lti wrote its model, then failed on the trace).
+#[test]
+fn an_output_in_a_missing_folder_is_refused_before_any_work() {
+    let dir = scratch_dir();
+    let data = dir.join("d.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "lti2x2",
+        "--steps",
+        "200",
+        "--out",
+        s(&data),
+    ]));
+    let model = dir.join("f.json");
+    let out = sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--order",
+        "2",
+        "--out",
+        s(&model),
+        "--trace",
+        s(&dir.join("no/dir/tr.csv")),
+    ]);
+    assert_one_line_error(&out, &["no/dir", "does not exist"]);
+    assert!(
+        !model.exists(),
+        "the model was written before the trace failed"
+    );
+    let out = sysid(&[
+        "n4sid",
+        "--data",
+        s(&data),
+        "--order",
+        "2",
+        "--out",
+        s(&dir.join("missing/n4.json")),
+    ]);
+    assert_one_line_error(&out, &["missing", "does not exist"]);
+}
+
+/// Outputs get the mode the user's umask gives any new file, and `--force` keeps the
+/// mode of the file it replaces.
+#[cfg(unix)]
+#[test]
+fn outputs_get_the_umask_s_mode_and_force_keeps_the_replaced_mode() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = scratch_dir();
+    let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let plain = dir.join("plain.txt");
+    std::fs::write(&plain, "x").unwrap();
+    let data = dir.join("d.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        "50",
+        "--out",
+        s(&data),
+    ]));
+    assert_eq!(mode(&data), mode(&plain));
+    std::fs::set_permissions(&data, std::fs::Permissions::from_mode(0o640)).unwrap();
+    assert_ok(&sysid(&[
+        "simulate",
+        "lgss",
+        "--steps",
+        "50",
+        "--out",
+        s(&data),
+        "--force",
+    ]));
+    assert_eq!(mode(&data), 0o640);
+}

@@ -95,11 +95,23 @@ fn temporary_beside(target: &Path) -> Result<NamedTempFile, OutputError> {
         .extension()
         .map(|e| format!(".{}", e.to_string_lossy()))
         .unwrap_or_default();
-    tempfile::Builder::new()
-        .prefix(&format!(".{name}.tmp-"))
-        .suffix(&suffix)
-        .tempfile_in(dir)
-        .map_err(|e| io(target, e))
+    let prefix = format!(".{name}.tmp-");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(&suffix);
+    // a new file gets the mode any program's new file gets (0666 less the umask), not
+    // the temporary file's private 0600
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let file = builder.tempfile_in(dir).map_err(|e| io(target, e))?;
+    // a replaced file keeps its mode
+    if let Ok(old) = std::fs::metadata(target)
+        && old.is_file()
+    {
+        file.as_file()
+            .set_permissions(old.permissions())
+            .map_err(|e| io(target, e))?;
+    }
+    Ok(file)
 }
 
 /// Moves the finished temporary file to `target` (removing it on failure).
@@ -227,6 +239,25 @@ mod tests {
             .collect();
         names.sort();
         names
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_new_file_gets_the_umask_s_mode_and_a_replaced_one_keeps_its_own() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        // what the umask gives any new file here
+        let plain = dir.path().join("plain.txt");
+        std::fs::write(&plain, "x").unwrap();
+        let ours = dir.path().join("ours.txt");
+        write_atomically(&ours, false, |w| w.write_all(b"x")).unwrap();
+        assert_eq!(mode(&ours), mode(&plain));
+        assert_ne!(mode(&ours), 0o600, "not the temporary file's private mode");
+        std::fs::set_permissions(&ours, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_atomically(&ours, true, |w| w.write_all(b"y")).unwrap();
+        assert_eq!(mode(&ours), 0o640);
+        assert_eq!(std::fs::read_to_string(&ours).unwrap(), "y");
     }
 
     #[test]

@@ -47,7 +47,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             message: format!("{} is not a probability strictly between 0 and 1", o.level),
         });
     }
-    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     let (model, file) = o.source.load()?;
     let future = match (&o.future_inputs, model.m()) {
         (_, 0) => nalgebra::DMatrix::zeros(0, o.steps),

@@ -116,7 +116,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         &o.criterion,
         o.stable,
     )?;
-    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     let mut file = o.data.read()?;
     file.require_outputs(&o.data.data)?;
     let trend = super::detrend::apply(&mut file, super::detrend::parse(&o.detrend)?)?;

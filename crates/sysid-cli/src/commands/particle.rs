@@ -252,7 +252,7 @@ fn write_states(
 
 /// `sysid pf`.
 pub fn run_filter(a: &ParticleArgs) -> Result<(), CliError> {
-    crate::files::refuse_existing(a.out.as_deref(), a.force)?;
+    crate::files::check_outputs(a.out.as_deref(), a.force)?;
     match choose_model(a)? {
         ChosenModel::Nlbench(m) => filter_with(
             a,
@@ -341,7 +341,7 @@ pub(crate) fn series_of<'a>(file: &'a DataFile, context: &str) -> Result<Series<
 
 /// `sysid psmooth`.
 pub fn run_smoother(a: &SmoothArgs) -> Result<(), CliError> {
-    crate::files::refuse_existing(a.common.out.as_deref(), a.common.force)?;
+    crate::files::check_outputs(a.common.out.as_deref(), a.common.force)?;
     match choose_model(&a.common)? {
         ChosenModel::Nlbench(m) => smooth_with(
             a,

@@ -275,7 +275,7 @@ fn file_priors(
 
 fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
     // refuse before a long run, not after it
-    crate::files::refuse_existing(a.out.as_deref(), a.force)?;
+    crate::files::check_outputs(a.out.as_deref(), a.force)?;
     if a.chains == 0 {
         return Err(bad("--chains", "must be at least 1"));
     }

@@ -36,7 +36,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             message: "must be at least 1".into(),
         });
     }
-    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     let (model, file) = o.source.load()?;
     let mut pred = model
         .predict(&file.record, o.horizon)

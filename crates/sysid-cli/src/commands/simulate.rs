@@ -59,7 +59,7 @@ pub struct Options {
 
 pub fn run(o: &Options) -> Result<(), CliError> {
     // every output checked before anything is written
-    crate::files::refuse_existing(
+    crate::files::check_outputs(
         std::iter::once(o.out.as_path()).chain(o.model_out.as_deref()),
         o.force,
     )?;

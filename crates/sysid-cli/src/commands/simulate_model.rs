@@ -23,7 +23,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 .into(),
         });
     };
-    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     let stored = read_model_file(model_path)?;
     // the model's columns (outputs only if the file has them), its linear trend removed
     let data = crate::DataArgs {
@@ -171,7 +171,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
 /// `sysid simulate --model m.toml [--data inputs.csv]`: one realisation of a nonlinear
 /// model file at its parameters' values, from the random stream `(seed, 0)`.
 fn run_model_file(o: &Options, path: &std::path::Path) -> Result<(), CliError> {
-    crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
+    crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     if o.model_out.is_some() || o.x0.is_some() || o.noise {
         return Err(CliError::BadOption {
             option: if o.model_out.is_some() {

@@ -28,7 +28,7 @@ pub enum Pass {
 const MAX_FIRST_BLOCK: usize = 1 << 20;
 
 pub fn run(a: &StatesArgs, pass: Pass) -> Result<(), CliError> {
-    crate::files::refuse_existing(std::iter::once(a.out.as_path()), a.force)?;
+    crate::files::check_outputs(std::iter::once(a.out.as_path()), a.force)?;
     let (n, steps, loglik, warnings, diffuse) = match pass {
         Pass::Filter => filter(a)?,
         Pass::Smooth => smooth(a)?,

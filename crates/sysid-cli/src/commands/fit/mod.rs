@@ -32,7 +32,7 @@ pub fn run(command: FitCommand) -> Result<(), CliError> {
         });
     };
     // refuse before a long fit, not after it
-    crate::files::refuse_existing(
+    crate::files::check_outputs(
         std::iter::once(o.out.as_path()).chain(o.trace.as_deref()),
         o.force,
     )?;

@@ -447,6 +447,7 @@ fn fit_prepared(
         warnings.push(LinearFitWarning::PolishShort {
             status: p.status.clone(),
             gain: p.loglik - p.loglik_before,
+            free_basis: spec.a && spec.c,
         });
     }
     if let Some(p) = polish.as_ref().filter(|p| p.boundary) {
@@ -485,8 +486,9 @@ fn fit_prepared(
     let want_errors = match options.std_errors {
         Switch::On => true,
         Switch::Off => false,
-        // a black-box model (free A and C) is not identifiable: no errors unless asked
-        Switch::Auto => feasible && !(spec.a && spec.c && run.estimate.n() > 1),
+        // a black-box model (free A and C, one state included: its scale is free) is
+        // not identifiable: no errors unless asked
+        Switch::Auto => feasible && !(spec.a && spec.c),
     };
     let uncertainty = match (want_errors && !interrupted)
         .then(|| standard_errors(&run.estimate, records, &spec))

@@ -24,6 +24,9 @@ pub enum LinearFitWarning {
         status: String,
         /// What it gained (nats).
         gain: f64,
+        /// A black-box model (free `A` and `C`): its state basis, the scale of a single
+        /// state, is free, and only the initial state's held covariance ties it.
+        free_basis: bool,
     },
     /// The polish headed to a maximum on the boundary (a collapsing `R`).
     PolishAtBoundary {
@@ -84,13 +87,31 @@ impl std::fmt::Display for LinearFitWarning {
                     ", or let --polish on finish it"
                 }
             ),
-            LinearFitWarning::PolishShort { status, gain } => write!(
-                f,
-                "the quasi-Newton polish stopped before converging ({status}, after gaining \
-                 {gain:.3e} nats): the estimate is not the maximum; fit again from the written \
-                 model (--init FILE), or bound the variances (--min-output-noise, \
-                 --min-variance) if one is heading to zero"
-            ),
+            LinearFitWarning::PolishShort {
+                status,
+                gain,
+                free_basis,
+            } => {
+                write!(
+                    f,
+                    "the quasi-Newton polish stopped before converging ({status}, after \
+                     gaining {gain:.3e} nats): the estimate is not the maximum; "
+                )?;
+                if *free_basis {
+                    f.write_str(
+                        "the state's basis is free (a black-box model: for one state, the \
+                         scale of x trades C against Q) and the search walks along it; fix \
+                         it (--fix C=1 for one state), or start the record from its \
+                         stationary law (--initial stationary)",
+                    )
+                } else {
+                    f.write_str(
+                        "fit again from the written model (--init FILE), or bound the \
+                         variances (--min-output-noise, --min-variance) if one is heading to \
+                         zero",
+                    )
+                }
+            }
             LinearFitWarning::PolishAtBoundary { status } => write!(
                 f,
                 "the quasi-Newton polish {status}; bound the variances (--min-output-noise, \

@@ -523,3 +523,84 @@ fn pmmh_summary_and_warnings_are_the_library_report_of_its_chains() {
         assert_eq!(json["ess_bulk"].as_f64(), Some(s.ess_bulk));
     }
 }
+
+/// `sysid n4sid --order auto` and `sysid loglik` give the library's numbers and
+/// warnings: the order, singular values, spectral radius and the subspace warnings;
+/// the written model's log-likelihood under its stored initial state.
+#[test]
+fn n4sid_auto_and_loglik_equal_the_library() {
+    use sysid::kalman::KalmanWorkspace;
+    use sysid::subspace::{N4sidOptions, Order, n4sid};
+    let path = data("heating_system.csv");
+    let dir = scratch_dir();
+    let out = dir.join("n4.json");
+    let run = sysid(&[
+        "n4sid",
+        "--data",
+        s(&path),
+        "--range",
+        ":400",
+        "--order",
+        "auto",
+        "--block-rows",
+        "3",
+        "--out",
+        s(&out),
+        "--json",
+    ]);
+    assert_ok(&run);
+    let summary: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let record = read_csv(&path, Some((0, 400))).record;
+    let options = N4sidOptions {
+        order: Order::Auto,
+        block_rows: Some(3),
+        ..Default::default()
+    };
+    let result = n4sid(&record, &options).unwrap();
+    assert_eq!(summary["order"], result.order);
+    let singular: Vec<f64> = summary["singular_values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(singular, result.singular_values);
+    assert_eq!(
+        summary["spectral_radius"].as_f64().map(f64::to_bits),
+        Some(result.spectral_radius.to_bits())
+    );
+    let warnings: Vec<String> = result
+        .warnings(&options)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    assert_eq!(summary["warnings"], serde_json::json!(warnings));
+    // three block rows of one output: candidates 1 and 2, the larger chosen and flagged
+    assert_eq!(result.order, 2);
+    assert!(
+        warnings.iter().any(|w| w.contains("largest candidate")),
+        "{warnings:?}"
+    );
+    // the written model (means in h, S kept) scored by loglik as by the library
+    let written: ModelSpec = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let model = written.build().unwrap();
+    let score = sysid(&[
+        "loglik",
+        "--model",
+        s(&out),
+        "--data",
+        s(&path),
+        "--range",
+        ":400",
+        "--json",
+    ]);
+    assert_ok(&score);
+    let score: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&score.stdout).trim()).unwrap();
+    let library = KalmanWorkspace::new().loglik(&model, &record).unwrap();
+    assert_eq!(
+        score["loglik"].as_f64().map(f64::to_bits),
+        Some(library.to_bits())
+    );
+}

@@ -97,7 +97,7 @@ pub(crate) struct ModelOnData {
 pub(crate) struct StatesArgs {
     #[command(flatten)]
     source: ModelOnData,
-    /// Output CSV file (t, x1.., x1_sd..).
+    /// Output CSV file (t, x1.., x1_sd..; a model file's state names instead of x1..).
     #[arg(long)]
     out: PathBuf,
     /// Replace an existing output file.

@@ -157,7 +157,8 @@ fn every_command_of_the_guide_runs() {
         ),
         (
             "osc-figures/osc-states-states",
-            &["state x1", "state x2", "95 % band"][..],
+            // the oscillator's own state names (p, v), as simulate --model writes them
+            &["state p", "state v", "95 % band", "true state"][..],
         ),
         (
             "heat-figures/compare",

@@ -131,7 +131,7 @@ fn a_model_file_goes_through_every_nonlinear_command() {
     assert!(
         std::fs::read_to_string(&states)
             .unwrap()
-            .starts_with("t,x1,x2,x1_sd,x2_sd\n")
+            .starts_with("t,p,v,p_sd,v_sd\n")
     );
     let chains = dir.join("chains.csv");
     let pmmh = json(&[
@@ -570,4 +570,78 @@ fn each_fit_class_help_lists_only_its_own_options() {
         "wiener",
     );
     has(&wiener, &linear, false, "wiener");
+}
+
+/// psmooth and pf name a model file's states as the file does (and as `simulate
+/// --model --states` writes them), so `plot --truth` draws the true states.
+#[test]
+fn smoothed_states_keep_the_model_s_names_and_plot_draws_their_truth() {
+    let dir = scratch_dir();
+    let model = dir.join("osc.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let (data, smoothed, filtered) = (dir.join("osc.csv"), dir.join("sm.csv"), dir.join("pf.csv"));
+    ok(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--steps",
+        "200",
+        "--states",
+        "--out",
+        s(&data),
+    ]);
+    let truth_header = std::fs::read_to_string(&data).unwrap();
+    let truth_header = truth_header.lines().next().unwrap().to_string();
+    ok(&[
+        "psmooth",
+        "--model",
+        s(&model),
+        "--data",
+        s(&data),
+        "--particles",
+        "200",
+        "--out",
+        s(&smoothed),
+    ]);
+    ok(&[
+        "pf",
+        "--model",
+        s(&model),
+        "--data",
+        s(&data),
+        "--particles",
+        "200",
+        "--out",
+        s(&filtered),
+    ]);
+    let header = |p: &std::path::Path| {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    let states: Vec<String> = truth_header.split(',').skip(2).map(String::from).collect();
+    assert_eq!(states.len(), 2, "{truth_header}");
+    assert_eq!(
+        header(&smoothed),
+        format!("t,{0},{1},{0}_sd,{1}_sd", states[0], states[1])
+    );
+    assert_eq!(header(&filtered), format!("t,{},{}", states[0], states[1]));
+    let figures = dir.join("figs");
+    ok(&[
+        "plot",
+        s(&smoothed),
+        "--truth",
+        s(&data),
+        "--out-dir",
+        s(&figures),
+    ]);
+    let svg = std::fs::read_to_string(figures.join("sm-states.svg")).unwrap();
+    assert_eq!(
+        svg.matches("true state").count(),
+        2,
+        "one truth per state panel"
+    );
 }

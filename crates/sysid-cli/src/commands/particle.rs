@@ -206,6 +206,14 @@ fn file_model(file: sysid::modelfile::ModelFile) -> Result<ChosenModel, CliError
     Ok(ChosenModel::File(Box::new(smc)))
 }
 
+/// The states' names: a model file's, else `x1, x2, ...` (as `simulate` names them).
+fn state_names(columns: &Columns, n: usize) -> Vec<String> {
+    match columns {
+        Columns::Names(model) if model.spec().states.len() == n => model.spec().states.clone(),
+        _ => (1..=n).map(|i| format!("x{i}")).collect(),
+    }
+}
+
 fn read_series(a: &ParticleArgs, columns: Columns) -> Result<DataFile, CliError> {
     match columns {
         Columns::Counts { outputs, inputs } => {
@@ -223,10 +231,11 @@ fn read_series(a: &ParticleArgs, columns: Columns) -> Result<DataFile, CliError>
 fn write_states(
     a: &ParticleArgs,
     time: &[f64],
-    n: usize,
+    names: &[String],
     means: &[f64],
     sds: Option<&[f64]>,
 ) -> Result<(), CliError> {
+    let n = names.len();
     let Some(out) = &a.out else { return Ok(()) };
     let mut w = create_output(out, a.force)?;
     let io = |source| CliError::Io {
@@ -234,9 +243,9 @@ fn write_states(
         source,
     };
     let mut header = vec!["t".to_string()];
-    header.extend((1..=n).map(|i| format!("x{i}")));
+    header.extend(names.iter().cloned());
     if sds.is_some() {
-        header.extend((1..=n).map(|i| format!("x{i}_sd")));
+        header.extend(names.iter().map(|name| format!("{name}_sd")));
     }
     writeln!(w, "{}", header.join(",")).map_err(io)?;
     for (k, &t) in time.iter().enumerate() {
@@ -276,6 +285,7 @@ fn filter_with<M: FilterModel + Sync>(
     columns: Columns,
 ) -> Result<(), CliError> {
     let options = filter_options(a, false)?;
+    let names = state_names(&columns, model.state_dim());
     let file = read_series(a, columns)?;
     // particles and their copy, weights, log-weights and ancestors; the filtered
     // means of every step
@@ -299,7 +309,7 @@ fn filter_with<M: FilterModel + Sync>(
         super::filter_trust::diagnose(model, &series, &pf, run.loglik, a, &file.time, &progress);
     progress.finish();
     let seconds = start.elapsed().as_secs_f64();
-    write_states(a, &file.time, model.state_dim(), pf.means(), None)?;
+    write_states(a, &file.time, &names, pf.means(), None)?;
     if a.json {
         let s = serde_json::json!({
             "command": "pf", "loglik": run.loglik, "resampled_steps": run.resampled_steps,
@@ -367,6 +377,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     let c = &a.common;
     let path_count = paths_of(&a.method, a.paths, c.particles)?;
     let options = filter_options(c, true)?;
+    let names = state_names(&columns, model.state_dim());
     let file = read_series(c, columns)?;
     // the filter's history (states, weights, ancestors at every step) and the paths
     let (n, steps) = (model.state_dim() as f64, file.record.len() as f64);
@@ -434,7 +445,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     progress.finish();
     let seconds = start.elapsed().as_secs_f64();
     let (means, sds) = (paths.means(), paths.std_devs());
-    write_states(c, &file.time, model.state_dim(), &means, Some(&sds))?;
+    write_states(c, &file.time, &names, &means, Some(&sds))?;
     if c.json {
         let s = serde_json::json!({
             "command": "psmooth", "method": a.method, "loglik": run.loglik,

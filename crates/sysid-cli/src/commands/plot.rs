@@ -4,7 +4,7 @@
 //! | --- | --- | --- |
 //! | EM trace (`fit --trace`) | columns `iteration, loglik, ...` | log-likelihood, and one panel per parameter column |
 //! | model (`fit`, `n4sid`, `simulate --model-out`) | `.json` | Bode magnitude of every input-output channel, one curve per model |
-//! | states (`smooth`, `filter`, `psmooth`, `pf`) | columns `t, x1.., [x1_sd..]` | each state with a 95 % band (mean +- 1.96 sd), against `--truth` |
+//! | states (`smooth`, `filter`, `psmooth`, `pf`) | columns `t, x1.., [x1_sd..]` (a model file's state names instead of `x1..`) | each state with a 95 % band (mean +- 1.96 sd), against `--truth` |
 //! | chains (`pmmh --out`, `pgas --out`) | columns `chain, iteration, burn_in, ...` | each parameter and the log-likelihood against the iteration, one line per chain, the burn-in faint |
 //! | data (`simulate`) | columns `t, u.., y..` | each column against t |
 //!
@@ -29,8 +29,9 @@ pub struct Options {
     /// channel).
     #[arg(long, default_value = "auto")]
     pub kind: String,
-    /// States: a data file with the true states (columns x1, x2, ...; `simulate`
-    /// writes them) to draw against the estimates.
+    /// States: a data file with the true states (columns named as the estimates':
+    /// x1, x2, ... or a model file's state names; `simulate --states` writes them) to
+    /// draw against the estimates.
     #[arg(long)]
     pub truth: Option<PathBuf>,
     /// Directory for the figures (created if missing).
@@ -261,10 +262,16 @@ fn states_figure(path: &Path, truth: Option<&Path>) -> Result<Figure, CliError> 
     // a long record is shown whole and, beside it, its first WINDOW rows in detail
     let rows = t.len();
     let windowed = rows > 3 * WINDOW;
-    for i in 1.. {
-        let name = format!("x{i}");
+    // the states are the columns other than the time and the sds, named as the model
+    // names them (x1, x2, ... or a model file's names)
+    let names: Vec<String> = header
+        .iter()
+        .filter(|h| *h != "t" && !h.ends_with("_sd"))
+        .cloned()
+        .collect();
+    for name in names {
         let Some(mean) = column(&header, &columns, &name) else {
-            break;
+            continue;
         };
         let sd = column(&header, &columns, &format!("{name}_sd"));
         let true_state = truth.as_ref().and_then(|(th, tc)| {
@@ -308,7 +315,7 @@ fn states_figure(path: &Path, truth: Option<&Path>) -> Result<Figure, CliError> 
     }
     if panels.is_empty() {
         return Err(bad(format!(
-            "{}: no state columns (x1, x2, ...)",
+            "{}: no state columns (x1, x2, ... or a model's state names)",
             path.display()
         )));
     }

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{assert_ok, s, scratch_dir, sysid};
+use common::{assert_ok, json_of, s, scratch_dir, sysid};
 use nalgebra::DMatrix;
 use std::path::{Path, PathBuf};
 use sysid::em::linear::{
@@ -66,9 +66,7 @@ fn cli_fit(args: &[&str]) -> (ModelSpec, serde_json::Value) {
     all.extend_from_slice(args);
     all.extend_from_slice(&["--out", s(&out), "--json"]);
     let run = sysid(&all);
-    assert_ok(&run);
-    let summary: serde_json::Value =
-        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let summary = json_of(&run);
     let spec: ModelSpec = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     (spec, summary)
 }
@@ -404,9 +402,7 @@ fn pf_and_its_diagnostics_equal_the_library() {
         "5",
         "--json",
     ]);
-    assert_ok(&run);
-    let summary: serde_json::Value =
-        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let summary = json_of(&run);
     let data = read_csv(&path, None);
     let y: Vec<f64> = data.record.y.iter().copied().collect();
     let series = Series::new(&y, 1).unwrap();
@@ -475,9 +471,7 @@ fn pmmh_summary_and_warnings_are_the_library_report_of_its_chains() {
         s(&chains_file),
         "--json",
     ]);
-    assert_ok(&run);
-    let summary: serde_json::Value =
-        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let summary = json_of(&run);
     let written: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&chains_file).unwrap()).unwrap();
     let numbers = |v: &serde_json::Value| -> Vec<f64> {
@@ -548,9 +542,7 @@ fn n4sid_auto_and_loglik_equal_the_library() {
         s(&out),
         "--json",
     ]);
-    assert_ok(&run);
-    let summary: serde_json::Value =
-        serde_json::from_str(String::from_utf8_lossy(&run.stdout).trim()).unwrap();
+    let summary = json_of(&run);
     let record = read_csv(&path, Some((0, 400))).record;
     let options = N4sidOptions {
         order: Order::Auto,
@@ -595,9 +587,7 @@ fn n4sid_auto_and_loglik_equal_the_library() {
         ":400",
         "--json",
     ]);
-    assert_ok(&score);
-    let score: serde_json::Value =
-        serde_json::from_str(String::from_utf8_lossy(&score.stdout).trim()).unwrap();
+    let score = json_of(&score);
     let library = KalmanWorkspace::new().loglik(&model, &record).unwrap();
     assert_eq!(
         score["loglik"].as_f64().map(f64::to_bits),

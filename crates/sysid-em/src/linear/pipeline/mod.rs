@@ -333,14 +333,22 @@ fn fit_order(
     order: Option<usize>,
     observer: &mut impl EmObserver<LinearGaussianModel>,
 ) -> Result<LinearFit, LinearFitError> {
-    let (training, held_out) = match options.split {
+    let (training, held_out) = split(data, options)?;
+    fit_prepared(training, held_out.as_ref(), options, order, observer)
+}
+
+/// The training steps and, with a split, the held-out ones.
+fn split(
+    data: &Signals,
+    options: &CheckedLinearFitOptions,
+) -> Result<(Signals, Option<Signals>), LinearFitError> {
+    Ok(match options.split {
         Some(fraction) => {
             let (first, rest) = data.split(fraction)?;
             (first, Some(rest))
         }
         None => (data.clone(), None),
-    };
-    fit_prepared(training, held_out.as_ref(), options, order, observer)
+    })
 }
 
 /// The training record's model and the steps of the fit after the split.

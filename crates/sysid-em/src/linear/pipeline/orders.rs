@@ -68,13 +68,7 @@ pub(super) fn fit_range(
     let mut probe = options.clone();
     probe.options.polish = Switch::Off;
     probe.options.std_errors = Switch::Off;
-    let (training, held_out) = match options.split {
-        Some(fraction) => {
-            let (first, rest) = data.split(fraction)?;
-            (first, Some(rest))
-        }
-        None => (data.clone(), None),
-    };
+    let (training, held_out) = super::split(data, options)?;
     let mut rows = Vec::new();
     let mut warnings = Vec::new();
     for n in from..=to {

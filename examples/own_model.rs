@@ -13,7 +13,7 @@
 
 use sysid::em::affine::{RobustOptions, fit_robust};
 use sysid::modelfile::ModelFile;
-use sysid::pmcmc::{IndependentPrior, PmmhOptions, pmmh, summarise};
+use sysid::pmcmc::{ChainRun, IndependentPrior, PmmhOptions, pmmh, summarise};
 use sysid::smc::{Series, Tanizaki};
 
 const MODEL: &str = r#"
@@ -91,7 +91,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         particles: 100,
         ..PmmhOptions::default()
     };
-    let chains = pmmh(&model, &prior, &data, &estimate, &pmmh_options, 2, 5, &())?;
+    let chains = pmmh(
+        &model,
+        &prior,
+        &data,
+        &estimate,
+        &pmmh_options,
+        &ChainRun::new(2, 5),
+    )?;
 
     println!("parameter      truth   particle EM   posterior mean (sd)   R-hat");
     for (k, s) in summarise(&chains).iter().enumerate() {

@@ -9,8 +9,9 @@ mod common;
 use sysid::kalman::{KalmanWorkspace, Record};
 use sysid::models::{LgssConjugate, LgssFamily, LinearGaussianSmc, System, lgss};
 use sysid::pmcmc::{
-    Chain, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily, ParameterStep,
-    PmmhOptions, effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
+    Chain, ChainRun, GibbsOptions, IndependentPrior, MetropolisWithinGibbs, ModelFamily,
+    ParameterStep, PmmhOptions, effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh,
+    summarise,
 };
 use sysid::smc::{ConditionalSmc, CsmcKernel, Rng, Series, stream};
 
@@ -112,9 +113,7 @@ fn pmmh_and_particle_gibbs_reach_the_exact_posterior() {
             particles: 200,
             ..Default::default()
         },
-        4,
-        7,
-        &(),
+        &ChainRun::new(4, 7),
     )
     .unwrap();
     for c in &pmmh_chains {
@@ -139,9 +138,7 @@ fn pmmh_and_particle_gibbs_reach_the_exact_posterior() {
                 particles: 10,
                 kernel,
             },
-            4,
-            8,
-            &(),
+            &ChainRun::new(4, 8),
         )
         .unwrap();
         assert_matches_exact(kernel.name(), &chains, &exact);
@@ -158,9 +155,7 @@ fn pmmh_and_particle_gibbs_reach_the_exact_posterior() {
             particles: 10,
             kernel: CsmcKernel::AncestorSampling,
         },
-        4,
-        8,
-        &(),
+        &ChainRun::new(4, 8),
     )
     .unwrap();
     assert_matches_exact("guided PGAS", &guided, &exact);
@@ -188,9 +183,7 @@ fn metropolis_within_gibbs_reaches_the_exact_posterior() {
             particles: 10,
             kernel: CsmcKernel::AncestorSampling,
         },
-        4,
-        9,
-        &(),
+        &ChainRun::new(4, 9),
     )
     .unwrap();
     assert_matches_exact("MH-within-PGAS", &chains, &exact);
@@ -208,7 +201,7 @@ impl ParameterStep<LgssFamily> for Fixed {
         _: &[f64],
         _: &Series,
         _: &mut Rng,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, sysid::smc::ModelError> {
         Ok(false)
     }
 }
@@ -300,9 +293,7 @@ fn ancestor_sampling_mixes_with_ten_particles_where_plain_particle_gibbs_degener
             &data,
             &truth,
             &options(kernel),
-            1,
-            4,
-            &(),
+            &ChainRun::new(1, 4),
         )
         .unwrap();
         chains[0].state_update_rate.clone().unwrap()
@@ -372,9 +363,7 @@ fn chains_are_bit_identical_for_any_thread_count() {
                     particles: 50,
                     ..Default::default()
                 },
-                3,
-                21,
-                &(),
+                &ChainRun::new(3, 21),
             )
             .unwrap();
             let b = particle_gibbs(
@@ -388,9 +377,7 @@ fn chains_are_bit_identical_for_any_thread_count() {
                     burn_in: 100,
                     ..Default::default()
                 },
-                3,
-                21,
-                &(),
+                &ChainRun::new(3, 21),
             )
             .unwrap();
             (a, b)
@@ -417,19 +404,33 @@ fn bad_starts_and_options_are_typed_errors() {
         &data,
         &[0.5, -1.0, 1.0],
         &options,
-        1,
-        1,
-        &(),
+        &ChainRun::new(1, 1),
     )
     .unwrap_err();
     assert!(err.to_string().contains("q = -1"), "{err}");
-    let err = pmmh(&family, &prior(), &data, &[0.5, 1.0], &options, 1, 1, &()).unwrap_err();
+    let err = pmmh(
+        &family,
+        &prior(),
+        &data,
+        &[0.5, 1.0],
+        &options,
+        &ChainRun::new(1, 1),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("expected 3"), "{err}");
     let bad = PmmhOptions {
         burn_in: 10,
         ..options.clone()
     };
-    let err = pmmh(&family, &prior(), &data, &[0.5, 1.0, 1.0], &bad, 1, 1, &()).unwrap_err();
+    let err = pmmh(
+        &family,
+        &prior(),
+        &data,
+        &[0.5, 1.0, 1.0],
+        &bad,
+        &ChainRun::new(1, 1),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("burn_in"), "{err}");
     let err = particle_gibbs(
         &family,
@@ -441,9 +442,7 @@ fn bad_starts_and_options_are_typed_errors() {
             particles: 1,
             ..Default::default()
         },
-        1,
-        1,
-        &(),
+        &ChainRun::new(1, 1),
     )
     .unwrap_err();
     assert!(err.to_string().contains("at least 2 particles"), "{err}");

@@ -20,7 +20,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 use sysid::models::{LgssConjugate, LgssFamily, Nlbench, NlbenchFamily, System};
 use sysid::pmcmc::{
-    ChainObserver, CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions,
+    ChainObserver, ChainRun, CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions,
     ScalarPrior, effective_sample_size, particle_gibbs, particle_gibbs_guided, pmmh, summarise,
 };
 use sysid::smc::Series;
@@ -89,9 +89,7 @@ pub fn run(reps: usize) {
                 iterations,
                 ..pmmh_options.clone()
             },
-            chains,
-            seed,
-            observer,
+            &ChainRun::new(chains, seed).observed_by(observer),
         )
         .expect("runs");
     };
@@ -128,9 +126,7 @@ pub fn run(reps: usize) {
                     &lg_series,
                     &[0.5, 1.0, 1.0],
                     &gibbs,
-                    1,
-                    r,
-                    &(),
+                    &ChainRun::new(1, r),
                 )
             })
             .expect("runs");
@@ -254,9 +250,7 @@ fn posterior_check() {
             particles: 100,
             ..Default::default()
         },
-        4,
-        7,
-        &(),
+        &ChainRun::new(4, 7),
     )
     .expect("runs");
     let pgas_chains = particle_gibbs(
@@ -271,9 +265,7 @@ fn posterior_check() {
             particles: 10,
             kernel: CsmcKernel::AncestorSampling,
         },
-        4,
-        8,
-        &(),
+        &ChainRun::new(4, 8),
     )
     .expect("runs");
     emit(

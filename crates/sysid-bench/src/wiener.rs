@@ -76,7 +76,7 @@ fn realisation(a: &Args, run: usize) -> Result<Outcome, String> {
     let em_seed: u64 = stream(a.seed, 2 * run as u64 + 1).random();
     let sim = BlindWiener::simulate(a.steps, data_seed);
     let data = Series::new(&sim.outputs, 2).map_err(|e| e.to_string())?;
-    let start = wiener_start(&sim.outputs)?;
+    let start = wiener_start(&sim.outputs).map_err(|e| e.reason)?;
     let model = WienerModel::default();
     let smoother = FfbsiReject {
         paths: a.particles,
@@ -102,7 +102,8 @@ fn realisation(a: &Args, run: usize) -> Result<Outcome, String> {
     .check()
     .map_err(|e| e.to_string())?;
     let started = std::time::Instant::now();
-    let fit = run_em(&mut em, start.theta()?, &options, &mut ());
+    let theta = start.theta().map_err(|e| e.reason)?;
+    let fit = run_em(&mut em, theta, &options, &mut ());
     Ok(Outcome {
         run,
         estimate: WienerEstimate::from_theta(&fit.estimate),

@@ -37,9 +37,9 @@ pub fn parse_model_file(text: &str) -> Result<(), String> {
 pub fn parse_nonlinear_model(text: &str) -> Result<(), String> {
     use sysid::smc::{ObservationDensity, TransitionDensity};
     let model = sysid::modelfile::ModelFile::parse(text, "fuzz.toml").map_err(|e| e.to_string())?;
-    let smc = model.at(&model.free_values())?;
+    let smc = model.at(&model.free_values()).map_err(|e| e.reason)?;
     let inputs = vec![0.0; 5 * smc.input_dim()];
-    let (states, outputs) = smc.simulate(5, &inputs, 1)?;
+    let (states, outputs) = smc.simulate(5, &inputs, 1).map_err(|e| e.reason)?;
     let (n, p, m) = (smc.spec().states.len(), smc.output_dim(), smc.input_dim());
     let u = vec![0.0; m];
     let _ = smc.log_observation(0, &states[..n], &u, &outputs[..p]);

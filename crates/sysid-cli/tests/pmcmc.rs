@@ -5,7 +5,9 @@
 mod common;
 use common::{assert_one_line_error, json_of, s, scratch_dir, simulate, sysid};
 use sysid::models::{LgssConjugate, LgssFamily, System};
-use sysid::pmcmc::{CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, particle_gibbs};
+use sysid::pmcmc::{
+    ChainRun, CsmcKernel, GibbsOptions, IndependentPrior, ModelFamily, particle_gibbs,
+};
 use sysid::smc::Series;
 
 fn lgss_data(dir: &std::path::Path, steps: usize) -> (std::path::PathBuf, Vec<f64>) {
@@ -64,9 +66,7 @@ fn pgas_equals_the_library_for_any_thread_count_and_finds_the_truth() {
             particles: 10,
             kernel: CsmcKernel::AncestorSampling,
         },
-        3,
-        5,
-        &(),
+        &ChainRun::new(3, 5),
     )
     .unwrap();
     let last = text.lines().last().unwrap();

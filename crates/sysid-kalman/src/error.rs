@@ -154,6 +154,28 @@ pub enum KalmanError {
         /// Record index (0-based).
         record: usize,
     },
+    /// An option of a computation out of its range (a horizon of 0, a level outside
+    /// (0, 1), more lags than residuals).
+    #[error("{name}: {message}")]
+    BadOption {
+        /// The option, as the library spells it (`level`, `horizon`, `lags`).
+        name: &'static str,
+        /// What is wrong with its value.
+        message: String,
+    },
+    /// Residual tests asked for more lags than an output has usable residuals, or for
+    /// none.
+    #[error(
+        "lags: {lags} must be at least 1 and below the {usable} usable residuals of output {output}"
+    )]
+    TooManyLags {
+        /// The lags asked for.
+        lags: usize,
+        /// The output's residuals where it is observed and determined.
+        usable: usize,
+        /// The output (1-based).
+        output: usize,
+    },
     /// Inputs and outputs of one record disagree in length.
     #[error("record {record}: inputs have {input_steps} steps but outputs have {output_steps}")]
     LengthMismatch {

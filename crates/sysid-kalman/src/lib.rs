@@ -47,6 +47,7 @@
 //! Gibson and Ninness, "Robust maximum-likelihood estimation of multivariable dynamic
 //! systems", Automatica 41 (2005).
 
+mod compare;
 pub mod conventional;
 mod data;
 mod dense;
@@ -67,6 +68,7 @@ mod spec;
 mod stats;
 mod trend;
 
+pub use compare::{Comparison, Horizon};
 pub use data::Record;
 pub use error::{KalmanError, Result};
 pub use filter::{FilterOutput, KalmanWorkspace};
@@ -74,7 +76,7 @@ pub use frequency::TransferFunction;
 pub use initial::{InitialState, spectral_radius, stationary_covariance, stationary_input_window};
 pub use long::{BLOCK_STEPS, BlockFilter};
 pub use model::{LinearGaussianModel, ModelBuilder};
-pub use predict::{Forecast, Predictions};
+pub use predict::{Forecast, ForecastIntervals, PredictionWarning, Predictions};
 pub use response::{Response, fit_percent};
 pub use simulate::Simulation;
 pub use smoother::SmootherOutput;

@@ -104,6 +104,62 @@ impl LinearGaussianModel {
     }
 }
 
+impl Predictions {
+    /// Per output, the root mean square of the standardised errors over the steps where
+    /// the output is observed: about 1 for a model that describes its own uncertainty,
+    /// above 1 for one that is too confident. 0 for an output never observed.
+    pub fn standardised_rms(&self) -> Vec<f64> {
+        self.standardised
+            .row_iter()
+            .map(|row| {
+                let (sum, count) = row
+                    .iter()
+                    .filter(|v| v.is_finite())
+                    .fold((0.0, 0usize), |(s, c), v| (s + v * v, c + 1));
+                (sum / count.max(1) as f64).sqrt()
+            })
+            .collect()
+    }
+
+    /// How many predictions (output and step) have an infinite standard deviation: they
+    /// depend on a diffuse initial state that the data have not yet determined.
+    pub fn undetermined(&self) -> usize {
+        self.sd.iter().filter(|v| v.is_infinite()).count()
+    }
+
+    /// What should temper a reading of these predictions.
+    pub fn warnings(&self) -> Vec<PredictionWarning> {
+        match self.undetermined() {
+            0 => Vec::new(),
+            count => vec![PredictionWarning::Undetermined { count }],
+        }
+    }
+}
+
+/// Why some predictions should be read with care.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PredictionWarning {
+    /// Predictions that depend on the diffuse initial state before the data determine
+    /// it; their standard deviation is infinite.
+    Undetermined {
+        /// How many (output, step) pairs.
+        count: usize,
+    },
+}
+
+impl std::fmt::Display for PredictionWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PredictionWarning::Undetermined { count } => write!(
+                f,
+                "{count} prediction(s) depend on the diffuse initial state before the data \
+                 determine it: their standard deviation is inf"
+            ),
+        }
+    }
+}
+
 /// Outputs beyond the end of a record (see [`LinearGaussianModel::forecast`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Forecast {
@@ -113,6 +169,55 @@ pub struct Forecast {
     pub sd: DMatrix<f64>,
     /// Their covariances `C P_{T+j|T} C' + R` (p x p each).
     pub covariances: Vec<DMatrix<f64>>,
+}
+
+impl Forecast {
+    /// Two-sided prediction intervals of probability `level` for each forecast output,
+    /// from the normal law of the forecast: `mean -+ z sd` with `z` the normal quantile
+    /// of `(1 + level) / 2`.
+    ///
+    /// # Errors
+    /// [`KalmanError::BadOption`] unless `0 < level < 1`.
+    pub fn intervals(&self, level: f64) -> Result<ForecastIntervals> {
+        let z = ForecastIntervals::half_width(level)?;
+        Ok(ForecastIntervals {
+            level,
+            z,
+            lower: self.mean.zip_map(&self.sd, |m, s| m - z * s),
+            upper: self.mean.zip_map(&self.sd, |m, s| m + z * s),
+        })
+    }
+}
+
+impl ForecastIntervals {
+    /// The half-width in standard deviations of an interval of probability `level`:
+    /// the normal quantile of `(1 + level) / 2`.
+    ///
+    /// # Errors
+    /// [`KalmanError::BadOption`] unless `0 < level < 1`.
+    pub fn half_width(level: f64) -> Result<f64> {
+        use statrs::distribution::{ContinuousCDF, Normal};
+        if !(level > 0.0 && level < 1.0) {
+            return Err(KalmanError::BadOption {
+                name: "level",
+                message: format!("{level} is not a probability strictly between 0 and 1"),
+            });
+        }
+        Ok(Normal::standard().inverse_cdf(0.5 + level / 2.0))
+    }
+}
+
+/// Prediction intervals of a [`Forecast`] (see [`Forecast::intervals`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ForecastIntervals {
+    /// Their probability.
+    pub level: f64,
+    /// The normal quantile: the half-width in standard deviations.
+    pub z: f64,
+    /// Lower bounds (p x steps).
+    pub lower: DMatrix<f64>,
+    /// Upper bounds (p x steps).
+    pub upper: DMatrix<f64>,
 }
 
 impl LinearGaussianModel {

@@ -1,6 +1,7 @@
 //! Residual tests: sample autocorrelation, cross-correlation with the inputs, and the
 //! Ljung-Box portmanteau statistic.
 
+use crate::{KalmanError, LinearGaussianModel, Predictions, Record, Result};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// The sample autocorrelation `r_k`, `k = 0..=max_lag`, of `x` with its mean removed:
@@ -97,6 +98,219 @@ pub fn ljung_box(x: &[f64], lags: usize, fitted: usize) -> Option<LjungBox> {
         p_value,
         lags,
     })
+}
+
+/// The tests of one output's one-step prediction errors (see [`ResidualTests`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputResiduals {
+    /// The output (0-based).
+    pub output: usize,
+    /// The steps tested: where the output is observed and its prediction determined.
+    pub samples: usize,
+    /// Autocorrelation of the standardised errors, lags `0..=lags`.
+    pub acf: Vec<f64>,
+    /// Per input, the cross-correlation of the errors with the earlier input, lags
+    /// `-lags..=lags` (index `k + lags`).
+    pub ccf: Vec<Vec<f64>>,
+    /// The Ljung-Box test over `lags` lags.
+    pub ljung_box: LjungBox,
+}
+
+impl OutputResiduals {
+    /// The 95 % bound of a white series' correlations, `1.96 / sqrt(samples)`.
+    pub fn bound_95(&self) -> f64 {
+        1.96 / (self.samples as f64).sqrt()
+    }
+
+    /// How many autocorrelations at lags `1..=lags` lie beyond [`Self::bound_95`].
+    pub fn acf_beyond_bound(&self) -> usize {
+        let bound = self.bound_95();
+        self.acf[1..].iter().filter(|r| r.abs() > bound).count()
+    }
+
+    /// Per input, how many cross-correlations lie beyond [`Self::bound_95`].
+    pub fn ccf_beyond_bound(&self) -> Vec<usize> {
+        let bound = self.bound_95();
+        self.ccf
+            .iter()
+            .map(|r| r.iter().filter(|v| v.abs() > bound).count())
+            .collect()
+    }
+}
+
+/// Are a model's one-step prediction errors white and independent of the inputs?
+/// Per output, the autocorrelation of the standardised innovations, their
+/// cross-correlation with each input, and the Ljung-Box test (MATLAB's `resid`,
+/// statsmodels' `test_serial_correlation`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResidualTests {
+    /// The lags tested.
+    pub lags: usize,
+    /// One entry per output.
+    pub outputs: Vec<OutputResiduals>,
+}
+
+impl ResidualTests {
+    /// The tests of one-step predictions (`predictions.horizon == 1`) of `record`, over
+    /// `lags` lags, on the steps where an output is observed and its prediction
+    /// determined.
+    ///
+    /// # Errors
+    /// [`KalmanError::TooManyLags`] when `lags` is 0 or not below an output's usable
+    /// residuals; [`KalmanError::Dimension`] when the predictions are not of `record`.
+    pub fn of(predictions: &Predictions, record: &Record, lags: usize) -> Result<Self> {
+        let (p, t_len) = predictions.standardised.shape();
+        if t_len != record.len() || p != record.y.nrows() {
+            return Err(KalmanError::Dimension {
+                name: "predictions".into(),
+                expected_rows: record.y.nrows(),
+                expected_cols: record.len(),
+                rows: p,
+                cols: t_len,
+            });
+        }
+        let mut outputs = Vec::with_capacity(p);
+        for i in 0..p {
+            let steps: Vec<usize> = (0..t_len)
+                .filter(|&t| {
+                    predictions.standardised[(i, t)].is_finite()
+                        && predictions.sd[(i, t)].is_finite()
+                })
+                .collect();
+            let e: Vec<f64> = steps
+                .iter()
+                .map(|&t| predictions.standardised[(i, t)])
+                .collect();
+            let ljung_box = ljung_box(&e, lags, 0).ok_or(KalmanError::TooManyLags {
+                lags,
+                usable: e.len(),
+                output: i + 1,
+            })?;
+            let ccf = (0..record.u.nrows())
+                .map(|j| {
+                    let u: Vec<f64> = steps.iter().map(|&t| record.u[(j, t)]).collect();
+                    cross_correlation(&e, &u, lags)
+                })
+                .collect();
+            outputs.push(OutputResiduals {
+                output: i,
+                samples: e.len(),
+                acf: autocorrelation(&e, lags),
+                ccf,
+                ljung_box,
+            });
+        }
+        Ok(ResidualTests { lags, outputs })
+    }
+
+    /// What the tests say is wrong with the model: correlated errors (Ljung-Box
+    /// p < 0.05), or errors correlated with an input at more lags than chance allows.
+    pub fn warnings(&self) -> Vec<ResidualWarning> {
+        let mut warnings = Vec::new();
+        // 5 % of the lags fall outside by chance: flag a count above the binomial mean
+        // plus two standard deviations (about its 97.5 % quantile)
+        let trials = (2 * self.lags + 1) as f64;
+        let chance = 0.05 * trials + 2.0 * (0.05 * 0.95 * trials).sqrt() + 1.0;
+        for o in &self.outputs {
+            if o.ljung_box.p_value < 0.05 {
+                warnings.push(ResidualWarning::Correlated {
+                    output: o.output,
+                    p_value: o.ljung_box.p_value,
+                    lags: o.ljung_box.lags,
+                });
+            }
+            for (input, &count) in o.ccf_beyond_bound().iter().enumerate() {
+                if count as f64 > chance {
+                    warnings.push(ResidualWarning::InputCorrelated {
+                        output: o.output,
+                        input,
+                        count,
+                        lags: 2 * self.lags + 1,
+                    });
+                }
+            }
+        }
+        warnings
+    }
+}
+
+impl LinearGaussianModel {
+    /// The residual tests of this model's one-step predictions of `record`
+    /// ([`ResidualTests::of`] on [`LinearGaussianModel::predict`] with horizon 1).
+    ///
+    /// # Errors
+    /// Those of the filter and of [`ResidualTests::of`].
+    pub fn residual_tests(&self, record: &Record, lags: usize) -> Result<ResidualTests> {
+        ResidualTests::of(&self.predict(record, 1)?, record, lags)
+    }
+}
+
+/// What a [`ResidualTests`] finds wrong with a model. Outputs and inputs are 0-based;
+/// [`ResidualWarning::message`] names them.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum ResidualWarning {
+    /// The output's errors are correlated: the model misses dynamics.
+    Correlated {
+        /// The output.
+        output: usize,
+        /// The Ljung-Box p-value.
+        p_value: f64,
+        /// Lags tested.
+        lags: usize,
+    },
+    /// The output's errors are correlated with an earlier input.
+    InputCorrelated {
+        /// The output.
+        output: usize,
+        /// The input.
+        input: usize,
+        /// Lags beyond the 95 % bound.
+        count: usize,
+        /// Lags tested (`2 lags + 1`).
+        lags: usize,
+    },
+}
+
+impl ResidualWarning {
+    /// The warning with the outputs and inputs called by these names (`y1`, `u1`, ...
+    /// where a name is missing).
+    pub fn message(&self, outputs: &[String], inputs: &[String]) -> String {
+        let name = |names: &[String], k: usize, prefix: char| {
+            names
+                .get(k)
+                .cloned()
+                .unwrap_or_else(|| format!("{prefix}{}", k + 1))
+        };
+        match self {
+            ResidualWarning::Correlated {
+                output,
+                p_value,
+                lags,
+            } => format!(
+                "the one-step errors of {} are correlated (Ljung-Box p = {p_value:.2e} over \
+                 {lags} lags): the model misses dynamics of the data; try a higher order",
+                name(outputs, *output, 'y')
+            ),
+            ResidualWarning::InputCorrelated {
+                output,
+                input,
+                count,
+                lags,
+            } => format!(
+                "the one-step errors of {} are correlated with {} at {count} of {lags} lags \
+                 beyond the 95 % bound: the model misses input dynamics",
+                name(outputs, *output, 'y'),
+                name(inputs, *input, 'u')
+            ),
+        }
+    }
+}
+
+impl std::fmt::Display for ResidualWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message(&[], &[]))
+    }
 }
 
 #[cfg(test)]

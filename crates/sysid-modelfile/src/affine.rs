@@ -25,6 +25,7 @@ use nalgebra::{DMatrix, DVector};
 use sysid_em::affine::{AffineEmError, AffineEmSpec, AffineModel, AffineParams};
 use sysid_em::linear::Covariance;
 use sysid_pmcmc::Support;
+use sysid_smc::ModelError;
 
 /// `e` as `sum_k coef_k * param_k + rest`: the terms by parameter (`None`: the rest).
 type LinearForm = Vec<(Option<usize>, Expr)>;
@@ -52,7 +53,7 @@ fn linear_form(
     e: &Expr,
     free: &dyn Fn(usize) -> bool,
     name: &dyn Fn(usize) -> String,
-) -> Result<LinearForm, String> {
+) -> Result<LinearForm, ModelError> {
     let has_free = |e: &Expr| e.any(&|s| matches!(s.node, Node::Var(Var::Param(k)) if free(k)));
     if !has_free(e) {
         return Ok(vec![(None, e.clone())]);
@@ -95,7 +96,8 @@ fn linear_form(
                 "the free parameter {} enters nonlinearly (a product of parameters, a \
                  power, a quotient by or a function of a parameter)",
                 name(k)
-            ))
+            )
+            .into())
         }
     }
 }
@@ -130,7 +132,7 @@ pub struct ExprAffine {
 
 impl ExprAffine {
     /// The affine form of `file`, or which rule it breaks.
-    pub(crate) fn new(file: ModelFile) -> Result<ExprAffine, String> {
+    pub(crate) fn new(file: ModelFile) -> Result<ExprAffine, ModelError> {
         let spec = file.spec();
         let params = &spec.parameters;
         let free = |k: usize| !params[k].fixed;
@@ -155,14 +157,16 @@ impl ExprAffine {
                                  closed-form M-step estimates each coefficient of each \
                                  equation on its own)",
                                 name(k)
-                            ));
+                            )
+                            .into());
                         }
                         if params[k].support != Support::Real {
                             return Err(format!(
                                 "the coefficient {} has bounds (the closed-form M-step does \
                                  not honour bounds)",
                                 name(k)
-                            ));
+                            )
+                            .into());
                         }
                         slots[k] = Some(if row < n {
                             Slot::StateCoef(row, col)
@@ -177,7 +181,7 @@ impl ExprAffine {
                      block: &str,
                      slot: fn(usize) -> Slot,
                      slots: &mut Vec<Option<Slot>>|
-         -> Result<Covariance, String> {
+         -> Result<Covariance, ModelError> {
             let mut free_count = 0;
             for (i, v) in variances.iter().enumerate() {
                 match v.node {
@@ -187,7 +191,8 @@ impl ExprAffine {
                                 "the free parameter {} is a noise variance and appears \
                                  elsewhere too",
                                 name(k)
-                            ));
+                            )
+                            .into());
                         }
                         slots[k] = Some(slot(i));
                         free_count += 1;
@@ -197,7 +202,8 @@ impl ExprAffine {
                             "a {block} noise variance is an expression of free parameters \
                              (the closed-form M-step needs each variance to be a free \
                              parameter of its own, or fixed)"
-                        ));
+                        )
+                        .into());
                     }
                     _ => {}
                 }
@@ -208,7 +214,8 @@ impl ExprAffine {
                 _ => Err(format!(
                     "some {block} noise variances are free and others fixed (the \
                      closed-form M-step estimates a block or holds it)"
-                )),
+                )
+                .into()),
             }
         };
         let pi_x = block(&spec.process_noise, "process", Slot::ProcessVar, &mut slots)?;
@@ -278,7 +285,7 @@ impl ExprAffine {
     }
 
     /// The affine parameters of the free parameters `theta` (fixed ones from the file).
-    pub fn params(&self, theta: &[f64]) -> Result<AffineParams, String> {
+    pub fn params(&self, theta: &[f64]) -> Result<AffineParams, ModelError> {
         self.file.at(theta)?;
         let values = self.file.full_values(theta);
         let spec = self.file.spec();
@@ -403,6 +410,6 @@ impl AffineModel for ExprAffine {
     fn smc_model(&self, params: &AffineParams) -> Result<ExprSmc, AffineEmError> {
         let theta = self.theta(params);
         ExprSmc::new(self.file.compiled().clone(), self.file.full_values(&theta))
-            .map_err(AffineEmError::InvalidParams)
+            .map_err(|e| AffineEmError::InvalidParams(e.reason))
     }
 }

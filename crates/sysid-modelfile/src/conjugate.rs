@@ -23,6 +23,7 @@ use nalgebra::{DMatrix, DVector};
 use sysid_em::affine::AffineModel;
 use sysid_pmcmc::conjugate::{gaussian_from_precision, inverse_gamma};
 use sysid_pmcmc::{ParameterStep, ScalarPrior};
+use sysid_smc::ModelError;
 use sysid_smc::{Rng, Series};
 
 /// The exact conditional draw of an affine model file's free parameters given the
@@ -70,7 +71,7 @@ impl AffineConjugate {
     /// ([`ModelFile::why_not_affine`]), a free parameter that is neither a coefficient
     /// nor a whole noise variance, a coefficient without a normal prior, a variance
     /// without an inverse-gamma prior.
-    pub fn new(file: &ModelFile, priors: &[ScalarPrior]) -> Result<AffineConjugate, String> {
+    pub fn new(file: &ModelFile, priors: &[ScalarPrior]) -> Result<AffineConjugate, ModelError> {
         let affine = file.affine().ok_or_else(|| {
             format!(
                 "the model is not affine in its free parameters: {}",
@@ -84,7 +85,8 @@ impl AffineConjugate {
                 "{} priors for {} free parameters",
                 priors.len(),
                 free_params.len()
-            ));
+            )
+            .into());
         }
         let mut free = Vec::with_capacity(priors.len());
         for (&k, prior) in free_params.iter().zip(priors) {
@@ -98,13 +100,15 @@ impl AffineConjugate {
                 (true, _) => {
                     return Err(format!(
                         "{name} is a coefficient: the conjugate step needs a normal prior"
-                    ));
+                    )
+                    .into());
                 }
                 (false, _) => {
                     return Err(format!(
                         "{name} is a noise variance: the conjugate step needs an \
                          inverse_gamma prior"
-                    ));
+                    )
+                    .into());
                 }
             }
             free.push((slot, *prior));
@@ -122,7 +126,7 @@ impl AffineConjugate {
         data: &RowData<'_>,
         variance: f64,
         rng: &mut Rng,
-    ) -> Result<(), String> {
+    ) -> Result<(), ModelError> {
         let RowData { alpha, r, samples } = *data;
         let k = cols.len();
         let free_col = |c: usize| cols.iter().any(|&(fc, _)| fc == c);
@@ -162,7 +166,7 @@ impl AffineConjugate {
         prior: ScalarPrior,
         data: &RowData<'_>,
         rng: &mut Rng,
-    ) -> Result<f64, String> {
+    ) -> Result<f64, ModelError> {
         let RowData { alpha, r, samples } = *data;
         let ScalarPrior::InverseGamma { shape, scale } = prior else {
             return Err("a noise variance without an inverse_gamma prior".into());
@@ -228,7 +232,7 @@ impl AffineConjugate {
         pi: &mut DMatrix<f64>,
         data: &RowData<'_>,
         rng: &mut Rng,
-    ) -> Result<(), String> {
+    ) -> Result<(), ModelError> {
         let row = which.row();
         let cols: Vec<(usize, ScalarPrior)> = self
             .free
@@ -267,7 +271,7 @@ impl ParameterStep<ModelFile> for AffineConjugate {
         trajectory: &[f64],
         data: &Series,
         rng: &mut Rng,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, ModelError> {
         let affine = &self.affine;
         let (n, p, r) = (
             affine.state_dim(),
@@ -279,7 +283,8 @@ impl ParameterStep<ModelFile> for AffineConjugate {
             return Err(format!(
                 "a trajectory of {steps} steps for {} observations",
                 data.steps()
-            ));
+            )
+            .into());
         }
         let mut params = affine.params(theta)?;
         let mut alpha = vec![0.0; steps * r];

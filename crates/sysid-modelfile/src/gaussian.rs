@@ -19,6 +19,7 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_em::gradient::{GradientEmError, GradientModel};
 use sysid_pmcmc::{ModelFamily, Support};
+use sysid_smc::ModelError;
 use sysid_smc::{
     InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel, StateSpace,
     TransitionBound, TransitionDensity, TransitionSampler,
@@ -152,7 +153,7 @@ pub struct GaussianSmc<M> {
 }
 
 impl<M: GaussianModel> GaussianSmc<M> {
-    fn new(model: std::sync::Arc<M>, theta: &[f64]) -> Result<GaussianSmc<M>, String> {
+    fn new(model: std::sync::Arc<M>, theta: &[f64]) -> Result<GaussianSmc<M>, ModelError> {
         let names = model.parameter_names();
         if theta.len() != names.len() {
             return Err(format!(
@@ -160,11 +161,12 @@ impl<M: GaussianModel> GaussianSmc<M> {
                 theta.len(),
                 names.len(),
                 names.join(", ")
-            ));
+            )
+            .into());
         }
         for ((name, s), &v) in names.iter().zip(model.supports()).zip(theta) {
             if !s.contains(v) {
-                return Err(format!("{name} = {v} is outside its support {s:?}"));
+                return Err(format!("{name} = {v} is outside its support {s:?}").into());
             }
         }
         let (n, p) = (model.state_dim(), model.output_dim());
@@ -173,7 +175,7 @@ impl<M: GaussianModel> GaussianSmc<M> {
         model.process_variances(theta, &mut q);
         model.measurement_variances(theta, &mut r);
         if let Some(v) = q.iter().chain(&r).find(|v| !(**v > 0.0 && v.is_finite())) {
-            return Err(format!("a noise variance is {v}; each must be positive"));
+            return Err(format!("a noise variance is {v}; each must be positive").into());
         }
         let (mut m, mut p1) = (vec![0.0; n], vec![0.0; n]);
         model.initial(theta, &mut m, &mut p1);
@@ -207,7 +209,7 @@ impl<M: GaussianModel> GaussianSmc<M> {
         steps: usize,
         inputs: &[f64],
         seed: u64,
-    ) -> Result<(Vec<f64>, Vec<f64>), String> {
+    ) -> Result<(Vec<f64>, Vec<f64>), ModelError> {
         let observation = |t: usize, x: &[f64], u: &[f64], out: &mut [f64]| {
             self.model.observation_mean(&self.theta, t, x, u, out)
         };
@@ -294,7 +296,7 @@ impl<M: GaussianModel> ModelFamily for Gaussian<M> {
     fn supports(&self) -> Vec<Support> {
         self.model.supports()
     }
-    fn model(&self, theta: &[f64]) -> Result<GaussianSmc<M>, String> {
+    fn model(&self, theta: &[f64]) -> Result<GaussianSmc<M>, ModelError> {
         GaussianSmc::new(self.model.clone(), theta)
     }
 }
@@ -324,7 +326,7 @@ impl<M: GaussianModel> GradientModel for Gaussian<M> {
     }
     fn smc_model(&self, theta: &[f64]) -> Result<GaussianSmc<M>, GradientEmError> {
         self.model(&self.constrained(theta))
-            .map_err(GradientEmError::InvalidParams)
+            .map_err(|e| GradientEmError::InvalidParams(e.reason))
     }
     fn unpack(&self, theta: &[f64]) -> Option<GaussianSmc<M>> {
         self.model(&self.constrained(theta)).ok()

@@ -141,7 +141,7 @@ impl GradientModel for ExprGradient {
     fn smc_model(&self, theta: &[f64]) -> Result<ExprSmc, GradientEmError> {
         self.file
             .at(&self.constrained(theta))
-            .map_err(GradientEmError::InvalidParams)
+            .map_err(|e| GradientEmError::InvalidParams(e.reason))
     }
     fn unpack(&self, theta: &[f64]) -> Option<Unpacked> {
         let model = self.file.at(&self.constrained(theta)).ok()?;

@@ -84,6 +84,7 @@ pub use spec::{FORMAT, ModelFileError, ModelSpec, Parameter};
 use smc::Compiled;
 use std::sync::Arc;
 use sysid_pmcmc::{ModelFamily, ScalarPrior, Support};
+use sysid_smc::ModelError;
 
 /// A checked, compiled model file; the family of models over its free parameters.
 #[derive(Debug, Clone, PartialEq)]
@@ -163,7 +164,7 @@ impl ModelFile {
     /// # Errors
     /// `theta` of the wrong length, outside a bound, or giving a non-positive noise
     /// variance (the message names the parameter or variance).
-    pub fn at(&self, theta: &[f64]) -> Result<ExprSmc, String> {
+    pub fn at(&self, theta: &[f64]) -> Result<ExprSmc, ModelError> {
         let names = self.free_names();
         if theta.len() != names.len() {
             return Err(format!(
@@ -171,7 +172,8 @@ impl ModelFile {
                 theta.len(),
                 names.len(),
                 names.join(", ")
-            ));
+            )
+            .into());
         }
         for ((name, &v), k) in names.iter().zip(theta).zip(self.spec().free()) {
             let support = self.spec().parameters[k].support;
@@ -179,7 +181,8 @@ impl ModelFile {
                 return Err(format!(
                     "{name} = {v} is outside its bounds ({})",
                     spec::describe_support(support)
-                ));
+                )
+                .into());
             }
         }
         ExprSmc::new(self.compiled.clone(), self.full_values(theta))
@@ -221,7 +224,7 @@ impl ModelFile {
 
     /// Why the model has no closed-form particle-EM form (`None` when it has one).
     pub fn why_not_affine(&self) -> Option<String> {
-        ExprAffine::new(self.clone()).err()
+        ExprAffine::new(self.clone()).err().map(|e| e.reason)
     }
 
     /// The gradient-EM form (every model has one).
@@ -249,7 +252,7 @@ impl ModelFamily for ModelFile {
             .collect()
     }
 
-    fn model(&self, theta: &[f64]) -> Result<ExprSmc, String> {
+    fn model(&self, theta: &[f64]) -> Result<ExprSmc, ModelError> {
         self.at(theta)
     }
 }

@@ -2,6 +2,7 @@
 //! compute the same way: the simulation loop and the diagonal initial density.
 
 use rand_distr::{Distribution, StandardNormal};
+use sysid_smc::ModelError;
 use sysid_smc::{InitialSampler, Rng, ScalarGaussianKernel, TransitionSampler};
 
 /// Simulates `steps` samples from the random stream `(seed, 0)`: the initial state,
@@ -15,12 +16,13 @@ pub(crate) fn simulate<M: InitialSampler + TransitionSampler>(
     measurement_sd: &[f64],
     seed: u64,
     observation_mean: impl Fn(usize, &[f64], &[f64], &mut [f64]),
-) -> Result<(Vec<f64>, Vec<f64>), String> {
+) -> Result<(Vec<f64>, Vec<f64>), ModelError> {
     if inputs.len() != steps * m {
         return Err(format!(
             "{} input values given for {steps} steps of {m} inputs",
             inputs.len()
-        ));
+        )
+        .into());
     }
     let (n, p) = (model.state_dim(), measurement_sd.len());
     let mut rng: Rng = sysid_smc::stream(seed, 0);
@@ -43,7 +45,7 @@ pub(crate) fn simulate<M: InitialSampler + TransitionSampler>(
             .chain(&outputs[t * p..])
             .find(|v| !v.is_finite())
         {
-            return Err(format!("the simulation diverged at step {t} (value {bad})"));
+            return Err(format!("the simulation diverged at step {t} (value {bad})").into());
         }
         std::mem::swap(&mut x, &mut next);
     }

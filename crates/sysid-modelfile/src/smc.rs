@@ -7,6 +7,7 @@ use crate::spec::ModelSpec;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use std::sync::Arc;
+use sysid_smc::ModelError;
 use sysid_smc::{
     InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel, StateSpace,
     TransitionBound, TransitionDensity, TransitionSampler, add_scaled_normals,
@@ -76,20 +77,18 @@ impl ExprSmc {
     /// # Errors
     /// A noise variance that is not positive and finite, or an initial variance that is
     /// negative, at these values (the message names it).
-    pub(crate) fn new(compiled: Arc<Compiled>, values: Vec<f64>) -> Result<ExprSmc, String> {
+    pub(crate) fn new(compiled: Arc<Compiled>, values: Vec<f64>) -> Result<ExprSmc, ModelError> {
         let spec = &compiled.spec;
         let lookup = |v: Var| match v {
             Var::Param(k) => values[k],
             _ => f64::NAN,
         };
-        let variance = |e: &crate::expr::Expr, name: &str| -> Result<Variance, String> {
+        let variance = |e: &crate::expr::Expr, name: &str| -> Result<Variance, ModelError> {
             let v = e.eval(&lookup);
             if v > 0.0 && v.is_finite() {
                 Ok(Variance::new(v))
             } else {
-                Err(format!(
-                    "the noise variance of {name} is {v}; it must be positive"
-                ))
+                Err(format!("the noise variance of {name} is {v}; it must be positive").into())
             }
         };
         let process = spec
@@ -116,7 +115,8 @@ impl ExprSmc {
                     "the initial law of {} is N({m}, {v}); it needs a finite mean and a \
                      non-negative variance",
                     spec.states[k]
-                ));
+                )
+                .into());
             }
         }
         Ok(ExprSmc {
@@ -152,7 +152,7 @@ impl ExprSmc {
         steps: usize,
         inputs: &[f64],
         seed: u64,
-    ) -> Result<(Vec<f64>, Vec<f64>), String> {
+    ) -> Result<(Vec<f64>, Vec<f64>), ModelError> {
         let sds: Vec<f64> = self.measurement.iter().map(|v| v.sd).collect();
         let spec = &self.compiled.spec;
         let observation = |t: usize, x: &[f64], u: &[f64], out: &mut [f64]| {

@@ -163,13 +163,13 @@ fn models_and_priors_the_step_cannot_take_are_refused() {
     let mut priors = PRIORS;
     priors[3] = ScalarPrior::Normal { mean: 0.0, sd: 1.0 };
     let err = AffineConjugate::new(&file, &priors).unwrap_err();
-    assert!(err.contains("q is a noise variance"), "{err}");
+    assert!(err.reason.contains("q is a noise variance"), "{err}");
     priors = PRIORS;
     priors[0] = ScalarPrior::Flat;
     let err = AffineConjugate::new(&file, &priors).unwrap_err();
-    assert!(err.contains("a is a coefficient"), "{err}");
+    assert!(err.reason.contains("a is a coefficient"), "{err}");
     let nonaffine =
         ModelFile::parse(&MODEL.replace("a*x + b*u", "sin(a*x) + b*u"), "n.toml").unwrap();
     let err = AffineConjugate::new(&nonaffine, &PRIORS).unwrap_err();
-    assert!(err.contains("not affine"), "{err}");
+    assert!(err.reason.contains("not affine"), "{err}");
 }

@@ -114,6 +114,7 @@ fn a_rust_model_has_the_model_files_densities_and_the_kalman_likelihood() {
         family
             .model(&[0.9, -1.0, 0.5])
             .unwrap_err()
+            .reason
             .contains("q = -1")
     );
 }

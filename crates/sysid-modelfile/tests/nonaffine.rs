@@ -4,7 +4,7 @@
 use sysid_em::gradient::{GradientEm, MStepOptions};
 use sysid_em::{EmOptions, run_em};
 use sysid_modelfile::ModelFile;
-use sysid_pmcmc::{IndependentPrior, PmmhOptions, pmmh, summarise};
+use sysid_pmcmc::{ChainRun, IndependentPrior, PmmhOptions, pmmh, summarise};
 use sysid_smc::{FfbsiReject, Series};
 
 /// A damped pendulum parametrised by its natural frequency `w0` and damping ratio
@@ -115,7 +115,15 @@ fn gradient_em_and_pmmh_recover_a_non_affine_model() {
         proposal_sd: vec![0.02, 0.1, 0.02, 0.1],
         ..PmmhOptions::default()
     };
-    let chains = pmmh(&file, &prior, &series, &estimate, &options, 2, 9, &()).unwrap();
+    let chains = pmmh(
+        &file,
+        &prior,
+        &series,
+        &estimate,
+        &options,
+        &ChainRun::new(2, 9),
+    )
+    .unwrap();
     let summary = summarise(&chains);
     eprintln!("PMMH {:.1} s", began.elapsed().as_secs_f64());
     let mut report = Vec::new();

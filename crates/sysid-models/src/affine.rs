@@ -108,7 +108,8 @@ impl AffineModel for NlbenchAffine {
 
     fn smc_model(&self, params: &AffineParams) -> Result<Nlbench, AffineEmError> {
         check_shapes(params, 1, 1, 4)?;
-        Nlbench::new(NlbenchAffine::nlbench_params(params)).map_err(AffineEmError::InvalidParams)
+        Nlbench::new(NlbenchAffine::nlbench_params(params))
+            .map_err(|e| AffineEmError::InvalidParams(e.reason))
     }
 }
 

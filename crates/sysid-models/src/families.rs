@@ -6,6 +6,7 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use sysid_kalman::{KalmanWorkspace, LinearGaussianModel, Record};
 use sysid_pmcmc::conjugate::{gaussian_from_precision, inverse_gamma};
 use sysid_pmcmc::{ModelFamily, ParameterStep, Prior, ScalarPrior, Support};
+use sysid_smc::ModelError;
 use sysid_smc::{Rng, Series, stream};
 
 use crate::{LinearGaussianSmc, Nlbench, NlbenchParams};
@@ -59,12 +60,14 @@ impl LgssFamily {
         iterations: usize,
         burn_in: usize,
         seed: u64,
-    ) -> Result<Vec<Vec<f64>>, String> {
+    ) -> Result<Vec<Vec<f64>>, ModelError> {
         let mut ws = KalmanWorkspace::new();
-        let mut log_target = |z: &[f64; 3]| -> Result<f64, String> {
+        let mut log_target = |z: &[f64; 3]| -> Result<f64, ModelError> {
             let theta = [z[0], z[1].exp(), z[2].exp()];
             let model = self.linear_model(&theta)?;
-            let loglik = ws.loglik(&model, record).map_err(|e| e.to_string())?;
+            let loglik = ws
+                .loglik(&model, record)
+                .map_err(|e| ModelError::new(e.to_string()))?;
             Ok(loglik + prior.log_density(&theta) + z[1] + z[2])
         };
         let mut rng = stream(seed, 0);
@@ -94,17 +97,14 @@ impl LgssFamily {
     }
 
     /// The linear Gaussian model at `theta` (for the Kalman filter's exact likelihood).
-    pub fn linear_model(&self, theta: &[f64]) -> Result<LinearGaussianModel, String> {
+    pub fn linear_model(&self, theta: &[f64]) -> Result<LinearGaussianModel, ModelError> {
         let [phi, q, r] = theta else {
-            return Err(format!(
-                "lgss has 3 parameters (phi, q, r), got {}",
-                theta.len()
-            ));
+            return Err(format!("lgss has 3 parameters (phi, q, r), got {}", theta.len()).into());
         };
         LinearGaussianModel::builder(dmatrix![*phi], dmatrix![1.0], dmatrix![*q], dmatrix![*r])
             .p1(dmatrix![self.p1])
             .build()
-            .map_err(|e| e.to_string())
+            .map_err(|e| ModelError::new(e.to_string()))
     }
 }
 
@@ -119,8 +119,9 @@ impl ModelFamily for LgssFamily {
         vec![Support::Real, Support::Positive, Support::Positive]
     }
 
-    fn model(&self, theta: &[f64]) -> Result<LinearGaussianSmc, String> {
-        LinearGaussianSmc::new(&self.linear_model(theta)?).map_err(|e| e.to_string())
+    fn model(&self, theta: &[f64]) -> Result<LinearGaussianSmc, ModelError> {
+        LinearGaussianSmc::new(&self.linear_model(theta)?)
+            .map_err(|e| ModelError::new(e.to_string()))
     }
 }
 
@@ -147,7 +148,7 @@ pub struct LgssConjugate {
 impl LgssConjugate {
     /// The conjugate step for priors `[phi, q, r]`, or why they are not conjugate
     /// (phi must be normal, q and r inverse gamma).
-    pub fn from_priors(priors: &[ScalarPrior]) -> Result<Self, String> {
+    pub fn from_priors(priors: &[ScalarPrior]) -> Result<Self, ModelError> {
         match priors {
             [
                 phi @ ScalarPrior::Normal { .. },
@@ -173,7 +174,7 @@ impl ParameterStep<LgssFamily> for LgssConjugate {
         x: &[f64],
         data: &Series,
         rng: &mut Rng,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, ModelError> {
         let (
             ScalarPrior::Normal { mean: m, sd: s },
             ScalarPrior::InverseGamma {
@@ -196,7 +197,7 @@ impl ParameterStep<LgssFamily> for LgssConjugate {
         let variance = 1.0 / precision;
         let mean = variance * (m / (s * s) + pairs().map(|(a, b)| a * b).sum::<f64>() / q);
         let phi = Normal::new(mean, variance.sqrt())
-            .map_err(|e| e.to_string())?
+            .map_err(|e| ModelError::new(e.to_string()))?
             .sample(rng);
         let sq: f64 = pairs().map(|(a, b)| (b - phi * a).powi(2)).sum();
         let q = inverse_gamma(aq + 0.5 * (x.len() - 1) as f64, bq + 0.5 * sq, rng)?;
@@ -264,13 +265,10 @@ impl ModelFamily for NlbenchFamily {
         s
     }
 
-    fn model(&self, theta: &[f64]) -> Result<Nlbench, String> {
+    fn model(&self, theta: &[f64]) -> Result<Nlbench, ModelError> {
         let expected = self.dim();
         if theta.len() != expected {
-            return Err(format!(
-                "nlbench has {expected} parameters, got {}",
-                theta.len()
-            ));
+            return Err(format!("nlbench has {expected} parameters, got {}", theta.len()).into());
         }
         let mut p = self.fixed;
         (p.a, p.b, p.c, p.d) = (theta[0], theta[1], theta[2], theta[3]);
@@ -327,8 +325,8 @@ pub struct NlbenchConjugate {
 impl NlbenchConjugate {
     /// The conjugate step for `family`'s priors (`a, b, c, d` normal, then `q, r`
     /// inverse gamma with `estimate_noise`), or why they are not conjugate.
-    pub fn from_priors(family: &NlbenchFamily, priors: &[ScalarPrior]) -> Result<Self, String> {
-        let refused = || {
+    pub fn from_priors(family: &NlbenchFamily, priors: &[ScalarPrior]) -> Result<Self, ModelError> {
+        let refused = || -> ModelError {
             format!(
                 "the conjugate nlbench step needs a, b, c, d ~ normal{} priors",
                 if family.estimate_noise {
@@ -337,6 +335,7 @@ impl NlbenchConjugate {
                     ""
                 }
             )
+            .into()
         };
         if priors.len() != family.dim() {
             return Err(refused());
@@ -377,14 +376,15 @@ impl ParameterStep<NlbenchFamily> for NlbenchConjugate {
         x: &[f64],
         data: &Series,
         rng: &mut Rng,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, ModelError> {
         if theta.len() != family.dim() || x.len() < 2 {
             return Err(format!(
                 "nlbench: {} parameters and {} states (expected {} and at least 2)",
                 theta.len(),
                 x.len(),
                 family.dim()
-            ));
+            )
+            .into());
         }
         let noise = self.inverse_gamma.filter(|_| family.estimate_noise);
         let (q, r) = if family.estimate_noise {

@@ -2,6 +2,7 @@
 
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
+use sysid_smc::ModelError;
 use sysid_smc::{
     InitialDensity, InitialSampler, ObservationDensity, ScalarGaussianKernel, StateSpace,
     TransitionBound, TransitionDensity, TransitionSampler, add_scaled_normals, stream,
@@ -93,25 +94,22 @@ pub struct NlbenchSimulation {
 impl Nlbench {
     /// The model with parameters `params`. Errors (naming the parameter) unless the
     /// coefficients are finite and the variances positive (`p1 >= 0`).
-    pub fn new(params: NlbenchParams) -> Result<Self, String> {
+    pub fn new(params: NlbenchParams) -> Result<Self, ModelError> {
         let p = params;
         for (name, v) in [("a", p.a), ("b", p.b), ("c", p.c), ("d", p.d), ("mu", p.mu)] {
             if !v.is_finite() {
-                return Err(format!("nlbench parameter {name} = {v} is not finite"));
+                return Err(format!("nlbench parameter {name} = {v} is not finite").into());
             }
         }
         for (name, v) in [("q", p.q), ("r", p.r)] {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(format!(
-                    "nlbench variance {name} = {v} must be positive and finite"
-                ));
+                return Err(
+                    format!("nlbench variance {name} = {v} must be positive and finite").into(),
+                );
             }
         }
         if !(p.p1 >= 0.0 && p.p1.is_finite()) {
-            return Err(format!(
-                "nlbench variance p1 = {} must be >= 0 and finite",
-                p.p1
-            ));
+            return Err(format!("nlbench variance p1 = {} must be >= 0 and finite", p.p1).into());
         }
         Ok(Nlbench {
             params,

@@ -6,6 +6,7 @@ use crate::wiener_observations::SortedObservations;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use sysid_em::gradient::{GradientEmError, GradientModel, Gradients, ObservationSum};
+use sysid_smc::ModelError;
 use sysid_smc::{
     InitialSampler, ObservationDensity, Series, StateSpace, Trajectories, TransitionBound,
     TransitionDensity, TransitionSampler, stream,
@@ -182,11 +183,11 @@ pub struct WienerEstimate {
 impl WienerEstimate {
     /// The unconstrained parameter vector, or why the values cannot be represented
     /// (a `Q` that is not positive definite, unordered breakpoints, a variance <= 0).
-    pub fn theta(&self) -> Result<Vec<f64>, String> {
+    pub fn theta(&self) -> Result<Vec<f64>, ModelError> {
         let q = self.q;
         let l11 = q[0][0].sqrt();
         if l11.is_nan() || l11 <= 0.0 {
-            return Err(format!("Q11 = {} is not positive", q[0][0]));
+            return Err(format!("Q11 = {} is not positive", q[0][0]).into());
         }
         let l21 = q[1][0] / l11;
         let l22_sq = q[1][1] - l21 * l21;
@@ -195,10 +196,10 @@ impl WienerEstimate {
         }
         let [b1, b2, b3, b4] = self.beta;
         if !(b2 > b1 && b4 > b3) {
-            return Err(format!("breakpoints {:?} are not ordered", self.beta));
+            return Err(format!("breakpoints {:?} are not ordered", self.beta).into());
         }
         if !(self.r[0] > 0.0 && self.r[1] > 0.0) {
-            return Err(format!("variances {:?} must be positive", self.r));
+            return Err(format!("variances {:?} must be positive", self.r).into());
         }
         Ok(vec![
             self.a[0][0],

@@ -21,6 +21,7 @@
 use crate::BlindWiener;
 use crate::wiener::{WienerEstimate, output_row};
 use nalgebra::{DMatrix, DVector};
+use sysid_smc::ModelError;
 
 /// Frequencies of the spectrum fit, `pi (k + 1/2) / 256`.
 const FIT_FREQUENCIES: usize = 256;
@@ -29,7 +30,7 @@ const FIT_FREQUENCIES: usize = 256;
 /// from N4SID (order 2, no inputs) on `y1` alone, in the basis where `C = [1, 0]`, with
 /// its noise covariance fitted to N4SID's spectrum (module docs); `r1 = r2 = 0.1`; each
 /// breakpoint at a tenth of its true value.
-pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, String> {
+pub fn wiener_start(outputs: &[f64]) -> Result<WienerEstimate, ModelError> {
     use sysid_subspace::{N4sidOptions, Order, n4sid};
     let steps = outputs.len() / 2;
     let y1 = DMatrix::from_iterator(1, steps, outputs.iter().step_by(2).copied());

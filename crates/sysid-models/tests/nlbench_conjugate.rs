@@ -123,6 +123,6 @@ fn non_conjugate_priors_are_refused() {
     let mut priors = PRIORS.to_vec();
     priors.extend([ScalarPrior::Normal { mean: 0.0, sd: 1.0 }; 2]);
     let err = NlbenchConjugate::from_priors(&family, &priors).unwrap_err();
-    assert!(err.contains("inverse_gamma"), "{err}");
+    assert!(err.reason.contains("inverse_gamma"), "{err}");
     assert!(NlbenchConjugate::from_priors(&family, &PRIORS).is_err());
 }

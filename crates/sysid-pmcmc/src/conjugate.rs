@@ -4,6 +4,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use rand_distr::{Distribution, Gamma, StandardNormal};
+use sysid_smc::ModelError;
 use sysid_smc::Rng;
 
 /// A draw from `N(P^{-1} b, P^{-1})` for a symmetric positive definite precision `P`
@@ -17,7 +18,7 @@ pub fn gaussian_from_precision(
     rhs: &DVector<f64>,
     what: &str,
     rng: &mut Rng,
-) -> Result<DVector<f64>, String> {
+) -> Result<DVector<f64>, ModelError> {
     let chol = precision
         .cholesky()
         .ok_or_else(|| format!("the conditional precision of {what} is not positive definite"))?;
@@ -35,7 +36,7 @@ pub fn gaussian_from_precision(
 ///
 /// # Errors
 /// A shape or scale that is not positive and finite.
-pub fn inverse_gamma(shape: f64, scale: f64, rng: &mut Rng) -> Result<f64, String> {
+pub fn inverse_gamma(shape: f64, scale: f64, rng: &mut Rng) -> Result<f64, ModelError> {
     let gamma = Gamma::new(shape, 1.0 / scale)
         .map_err(|e| format!("{e} (shape {shape}, scale {scale})"))?;
     Ok(1.0 / gamma.sample(rng))

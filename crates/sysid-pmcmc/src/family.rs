@@ -1,5 +1,6 @@
 //! A parametrised family of state-space models: what the samplers move over.
 
+use sysid_smc::ModelError;
 use sysid_smc::{FilterModel, TransitionDensity};
 
 use crate::{PmcmcError, Support};
@@ -43,20 +44,20 @@ use crate::{PmcmcError, Support};
 /// #         ScalarGaussianKernel::with_variance(self.q).log_density(self.phi * x[0], next[0])
 /// #     }
 /// # }
-/// use sysid_pmcmc::{IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior, Support, pmmh};
+/// use sysid_pmcmc::{ChainRun, IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior, Support, pmmh};
 /// struct ArFamily;
 /// impl ModelFamily for ArFamily {
 ///     type Model = Ar;
 ///     fn parameter_names(&self) -> Vec<String> { vec!["phi".into()] }
 ///     fn supports(&self) -> Vec<Support> { vec![Support::Interval(-1.0, 1.0)] }
-///     fn model(&self, theta: &[f64]) -> Result<Ar, String> {
+///     fn model(&self, theta: &[f64]) -> Result<Ar, sysid_smc::ModelError> {
 ///         Ok(Ar { phi: theta[0], q: 1.0 })
 ///     }
 /// }
 /// let y = [0.3, -0.4, 1.2, 0.8, 1.1, 0.2];
 /// let prior = IndependentPrior::new(&["phi".into()], vec![ScalarPrior::Uniform { low: -1.0, high: 1.0 }])?;
 /// let options = PmmhOptions { iterations: 200, burn_in: 50, particles: 50, ..PmmhOptions::default() };
-/// let chains = pmmh(&ArFamily, &prior, &Series::new(&y, 1)?, &[0.5], &options, 1, 3, &())?;
+/// let chains = pmmh(&ArFamily, &prior, &Series::new(&y, 1)?, &[0.5], &options, &ChainRun::new(1, 3))?;
 /// assert!(chains[0].parameter(0).iter().all(|phi| phi.abs() < 1.0));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
@@ -73,7 +74,7 @@ pub trait ModelFamily: Sync {
     /// The model at `theta`, or why `theta` is not admissible. The samplers treat a
     /// refusal inside the chain as zero posterior density (the proposal is rejected)
     /// and at the start as an error.
-    fn model(&self, theta: &[f64]) -> Result<Self::Model, String>;
+    fn model(&self, theta: &[f64]) -> Result<Self::Model, ModelError>;
 
     /// Number of parameters.
     fn dim(&self) -> usize {
@@ -143,5 +144,5 @@ pub(crate) fn check_start<F: ModelFamily>(
     }
     family
         .model(theta)
-        .map_err(|reason| PmcmcError::InadmissibleStart { reason })
+        .map_err(|e| PmcmcError::InadmissibleStart { reason: e.reason })
 }

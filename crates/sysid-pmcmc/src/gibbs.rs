@@ -32,6 +32,7 @@
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
+use sysid_smc::ModelError;
 use sysid_smc::{
     ConditionalSmc, CsmcKernel, CsmcSummary, GuidedProposal, InitialDensity, ObservationDensity,
     Rng, Series, SmcError, TransitionDensity, stream,
@@ -39,7 +40,7 @@ use sysid_smc::{
 
 use crate::family::{Transform, check_start};
 use crate::pmmh::{ChainRecorder, check_lengths};
-use crate::{Chain, ChainObserver, ModelFamily, PmcmcError, Prior};
+use crate::{Chain, ChainRun, ModelFamily, PmcmcError, Prior};
 
 /// A Markov kernel for `theta` given the states, leaving `p(theta | x, y)` invariant.
 ///
@@ -85,13 +86,13 @@ use crate::{Chain, ChainObserver, ModelFamily, PmcmcError, Prior};
 /// #     type Model = Ar;
 /// #     fn parameter_names(&self) -> Vec<String> { vec!["phi".into()] }
 /// #     fn supports(&self) -> Vec<Support> { vec![Support::Interval(-1.0, 1.0)] }
-/// #     fn model(&self, theta: &[f64]) -> Result<Ar, String> { Ok(Ar { phi: theta[0], q: 1.0 }) }
+/// #     fn model(&self, theta: &[f64]) -> Result<Ar, sysid_smc::ModelError> { Ok(Ar { phi: theta[0], q: 1.0 }) }
 /// # }
 /// #[derive(Clone)]
 /// struct PhiStep { sd: f64 }
 /// impl ParameterStep<ArFamily> for PhiStep {
 ///     fn update(&mut self, family: &ArFamily, theta: &mut [f64], x: &[f64], _data: &Series,
-///         rng: &mut sysid_smc::Rng) -> Result<bool, String> {
+///         rng: &mut sysid_smc::Rng) -> Result<bool, sysid_smc::ModelError> {
 ///         let log_p = |phi: f64| -> f64 {
 ///             let model = Ar { phi, q: 1.0 };
 ///             x.windows(2).map(|w| model.log_transition(0, &w[..1], &[], &w[1..])).sum()
@@ -124,7 +125,7 @@ pub trait ParameterStep<F: ModelFamily>: Clone + Send + Sync {
         trajectory: &[f64],
         data: &Series,
         rng: &mut Rng,
-    ) -> Result<bool, String>;
+    ) -> Result<bool, ModelError>;
 }
 
 /// Settings of particle Gibbs.
@@ -151,9 +152,9 @@ impl Default for GibbsOptions {
     }
 }
 
-/// Runs `chains` particle Gibbs chains from `start`, in parallel on the current rayon
-/// pool. `prior` is recorded per draw (the step uses its own).
-#[allow(clippy::too_many_arguments)]
+/// Runs `run.chains` particle Gibbs chains from `start`, in parallel on the current
+/// rayon pool; chain `c` draws from the random stream `(run.seed, c)`. `prior` is
+/// recorded per draw (the step uses its own).
 pub fn particle_gibbs<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     family: &F,
     prior: &P,
@@ -161,27 +162,29 @@ pub fn particle_gibbs<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     data: &Series,
     start: &[f64],
     options: &GibbsOptions,
-    chains: usize,
-    seed: u64,
-    observer: &dyn ChainObserver,
+    run: &ChainRun<'_>,
 ) -> Result<Vec<Chain>, PmcmcError> {
-    check_options(options)?;
-    check_start(family, start)?;
     let sweep = |csmc: &mut ConditionalSmc,
                  model: &F::Model,
                  reference: Option<&[f64]>,
                  out: &mut [f64],
                  rng: &mut Rng| csmc.sample(model, data, reference, out, rng);
-    run_chains(
-        family, prior, step, data, start, options, chains, seed, observer, &sweep,
-    )
+    Gibbs {
+        family,
+        prior,
+        step,
+        data,
+        start,
+        options,
+        run,
+    }
+    .chains(&sweep)
 }
 
 /// As [`particle_gibbs`], with the conditional SMC's locally optimal proposal
 /// (`ConditionalSmc::sample_guided`) for models that provide one
 /// ([`GuidedProposal`]): with informative observations the state trajectory is then
 /// renewed at every step even with very few particles.
-#[allow(clippy::too_many_arguments)]
 pub fn particle_gibbs_guided<F, P, S>(
     family: &F,
     prior: &P,
@@ -189,9 +192,7 @@ pub fn particle_gibbs_guided<F, P, S>(
     data: &Series,
     start: &[f64],
     options: &GibbsOptions,
-    chains: usize,
-    seed: u64,
-    observer: &dyn ChainObserver,
+    run: &ChainRun<'_>,
 ) -> Result<Vec<Chain>, PmcmcError>
 where
     F: ModelFamily,
@@ -199,17 +200,22 @@ where
     P: Prior,
     S: ParameterStep<F>,
 {
-    check_options(options)?;
-    check_start(family, start)?;
     let sweep =
         |csmc: &mut ConditionalSmc,
          model: &F::Model,
          reference: Option<&[f64]>,
          out: &mut [f64],
          rng: &mut Rng| csmc.sample_guided(model, data, reference, out, rng);
-    run_chains(
-        family, prior, step, data, start, options, chains, seed, observer, &sweep,
-    )
+    Gibbs {
+        family,
+        prior,
+        step,
+        data,
+        start,
+        options,
+        run,
+    }
+    .chains(&sweep)
 }
 
 /// One conditional SMC sweep (bootstrap or guided).
@@ -234,127 +240,118 @@ fn check_options(options: &GibbsOptions) -> Result<(), PmcmcError> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
-fn run_chains<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
-    family: &F,
-    prior: &P,
-    step: &S,
-    data: &Series,
-    start: &[f64],
-    options: &GibbsOptions,
-    chains: usize,
-    seed: u64,
-    observer: &dyn ChainObserver,
-    sweep: &Sweep<'_, F::Model>,
-) -> Result<Vec<Chain>, PmcmcError> {
-    (0..chains)
-        .into_par_iter()
-        .map(|c| {
-            gibbs_chain(
-                family,
-                prior,
-                step.clone(),
-                data,
-                start,
-                options,
-                c,
-                seed,
-                observer,
-                sweep,
-            )
-        })
-        .collect()
+/// A particle Gibbs run: what both samplers share but the sweep.
+struct Gibbs<'a, F, P, S> {
+    family: &'a F,
+    prior: &'a P,
+    step: &'a S,
+    data: &'a Series<'a>,
+    start: &'a [f64],
+    options: &'a GibbsOptions,
+    run: &'a ChainRun<'a>,
 }
 
-#[allow(clippy::too_many_arguments)]
-fn gibbs_chain<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
-    family: &F,
-    prior: &P,
-    mut step: S,
-    data: &Series,
-    start: &[f64],
-    options: &GibbsOptions,
-    chain: usize,
-    seed: u64,
-    observer: &dyn ChainObserver,
-    sweep: &Sweep<'_, F::Model>,
-) -> Result<Chain, PmcmcError> {
-    let smc_error = |iteration: usize| {
-        move |source| PmcmcError::Smc {
-            chain,
-            iteration,
-            source,
-        }
-    };
-    let mut rng = stream(seed, chain as u64);
-    let mut csmc = ConditionalSmc::new(options.particles, options.kernel).map_err(smc_error(0))?;
-    let mut theta = start.to_vec();
-    let model = family
-        .model(&theta)
-        .map_err(|reason| PmcmcError::InadmissibleStart { reason })?;
-    let n = sysid_smc::StateSpace::state_dim(&model);
-    let steps = data.steps();
-    let mut trajectory = vec![0.0; steps * n];
-    sweep(&mut csmc, &model, None, &mut trajectory, &mut rng).map_err(smc_error(0))?;
-    let mut previous = trajectory.clone();
-    let mut changes = vec![0usize; steps];
-    let mut state_sum = vec![0.0; steps * n];
-    let mut out = ChainRecorder::new(
-        family.parameter_names(),
-        options.iterations,
-        options.burn_in,
-    );
-    for iteration in 0..options.iterations {
-        let accepted = step
-            .update(family, &mut theta, &trajectory, data, &mut rng)
-            .map_err(|reason| PmcmcError::ParameterStep {
+impl<F: ModelFamily, P: Prior, S: ParameterStep<F>> Gibbs<'_, F, P, S> {
+    /// Checks the options and the start, then runs the chains in parallel.
+    fn chains(&self, sweep: &Sweep<'_, F::Model>) -> Result<Vec<Chain>, PmcmcError> {
+        check_options(self.options)?;
+        check_start(self.family, self.start)?;
+        (0..self.run.chains)
+            .into_par_iter()
+            .map(|c| self.chain(c, sweep))
+            .collect()
+    }
+
+    /// Chain `chain`.
+    fn chain(&self, chain: usize, sweep: &Sweep<'_, F::Model>) -> Result<Chain, PmcmcError> {
+        let Gibbs {
+            family,
+            prior,
+            data,
+            start,
+            options,
+            ..
+        } = *self;
+        let (seed, observer) = (self.run.seed, self.run.observer);
+        let mut step = self.step.clone();
+        let smc_error = |iteration: usize| {
+            move |source| PmcmcError::Smc {
                 chain,
                 iteration,
-                reason,
-            })?;
+                source,
+            }
+        };
+        let mut rng = stream(seed, chain as u64);
+        let mut csmc =
+            ConditionalSmc::new(options.particles, options.kernel).map_err(smc_error(0))?;
+        let mut theta = start.to_vec();
         let model = family
             .model(&theta)
-            .map_err(|reason| PmcmcError::ParameterStep {
-                chain,
-                iteration,
-                reason: format!("the step moved to an inadmissible point: {reason}"),
-            })?;
-        previous.copy_from_slice(&trajectory);
-        let result = sweep(
-            &mut csmc,
-            &model,
-            Some(&previous),
-            &mut trajectory,
-            &mut rng,
-        )
-        .map_err(smc_error(iteration))?;
-        if iteration >= options.burn_in {
-            for (t, (new, old)) in trajectory
-                .chunks_exact(n)
-                .zip(previous.chunks_exact(n))
-                .enumerate()
-            {
-                if new != old {
-                    changes[t] += 1;
+            .map_err(|e| PmcmcError::InadmissibleStart { reason: e.reason })?;
+        let n = sysid_smc::StateSpace::state_dim(&model);
+        let steps = data.steps();
+        let mut trajectory = vec![0.0; steps * n];
+        sweep(&mut csmc, &model, None, &mut trajectory, &mut rng).map_err(smc_error(0))?;
+        let mut previous = trajectory.clone();
+        let mut changes = vec![0usize; steps];
+        let mut state_sum = vec![0.0; steps * n];
+        let mut out = ChainRecorder::new(
+            family.parameter_names(),
+            options.iterations,
+            options.burn_in,
+        );
+        for iteration in 0..options.iterations {
+            let accepted = step
+                .update(family, &mut theta, &trajectory, data, &mut rng)
+                .map_err(|e| PmcmcError::ParameterStep {
+                    chain,
+                    iteration,
+                    reason: e.reason,
+                })?;
+            let model = family
+                .model(&theta)
+                .map_err(|reason| PmcmcError::ParameterStep {
+                    chain,
+                    iteration,
+                    reason: format!("the step moved to an inadmissible point: {reason}"),
+                })?;
+            previous.copy_from_slice(&trajectory);
+            let result = sweep(
+                &mut csmc,
+                &model,
+                Some(&previous),
+                &mut trajectory,
+                &mut rng,
+            )
+            .map_err(smc_error(iteration))?;
+            if iteration >= options.burn_in {
+                for (t, (new, old)) in trajectory
+                    .chunks_exact(n)
+                    .zip(previous.chunks_exact(n))
+                    .enumerate()
+                {
+                    if new != old {
+                        changes[t] += 1;
+                    }
+                }
+                for (s, &x) in state_sum.iter_mut().zip(&trajectory) {
+                    *s += x;
                 }
             }
-            for (s, &x) in state_sum.iter_mut().zip(&trajectory) {
-                *s += x;
+            out.push(&theta, result.loglik, prior.log_density(&theta), accepted);
+            observer.iteration(chain, iteration);
+            if observer.should_stop() && iteration + 1 < options.iterations {
+                out.interrupt();
+                break;
             }
         }
-        out.push(&theta, result.loglik, prior.log_density(&theta), accepted);
-        observer.iteration(chain, iteration);
-        if observer.should_stop() && iteration + 1 < options.iterations {
-            out.interrupt();
-            break;
-        }
+        // the post-burn-in iterations actually made (fewer when interrupted)
+        let kept = out.len().saturating_sub(options.burn_in).max(1) as f64;
+        let mut result = out.finish();
+        result.state_update_rate = Some(changes.iter().map(|&c| c as f64 / kept).collect());
+        result.state_mean = Some(state_sum.iter().map(|s| s / kept).collect());
+        Ok(result)
     }
-    // the post-burn-in iterations actually made (fewer when interrupted)
-    let kept = out.len().saturating_sub(options.burn_in).max(1) as f64;
-    let mut result = out.finish();
-    result.state_update_rate = Some(changes.iter().map(|&c| c as f64 / kept).collect());
-    result.state_mean = Some(state_sum.iter().map(|s| s / kept).collect());
-    Ok(result)
 }
 
 /// `log p_theta(x, y) = log mu(x_0) + sum_t log f(x_{t+1} | x_t) + sum_t log g(y_t | x_t)`
@@ -406,13 +403,14 @@ where
         trajectory: &[f64],
         data: &Series,
         rng: &mut Rng,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, ModelError> {
         let d = theta.len();
         if self.proposal_sd.len() != d {
             return Err(format!(
                 "proposal_sd has {} entries for {d} parameters",
                 self.proposal_sd.len()
-            ));
+            )
+            .into());
         }
         let transform = Transform::new(family.supports());
         let mut z = vec![0.0; d];

@@ -44,7 +44,7 @@ pub use gibbs::{
     GibbsOptions, MetropolisWithinGibbs, ParameterStep, complete_data_log_likelihood,
     particle_gibbs, particle_gibbs_guided,
 };
-pub use observer::ChainObserver;
+pub use observer::{ChainObserver, ChainRun};
 pub use pmmh::{PmmhOptions, pmmh};
 pub use prior::{IndependentPrior, Prior, ScalarPrior};
 pub use report::{ACCEPTANCE_LIMIT, ChainReport, ChainWarning, ESS_LIMIT, RHAT_LIMIT};

@@ -48,7 +48,7 @@ use rayon::prelude::*;
 use sysid_smc::{FilterOptions, ParticleFilter, Resampling, Series, SmcError, stream};
 
 use crate::family::{Transform, check_start};
-use crate::{Chain, ChainObserver, ModelFamily, PmcmcError, Prior};
+use crate::{Chain, ChainRun, ModelFamily, PmcmcError, Prior};
 
 /// Iterations between two adaptations of the proposal shape during burn-in.
 pub const ADAPT_EVERY: usize = 100;
@@ -138,28 +138,27 @@ pub(crate) fn check_lengths(iterations: usize, burn_in: usize) -> Result<(), Pmc
     Ok(())
 }
 
-/// Runs `chains` independent PMMH chains from `start` (constrained parameters), in
-/// parallel on the current rayon pool. Chain `c` uses the random stream `(seed, c)`.
+/// Runs `run.chains` independent PMMH chains from `start` (constrained parameters), in
+/// parallel on the current rayon pool. Chain `c` uses the random stream
+/// `(run.seed, c)`.
 ///
 /// # Example
 /// ```no_run
 /// # fn demo<F: sysid_pmcmc::ModelFamily>(family: &F, prior: &sysid_pmcmc::IndependentPrior,
 /// #         data: &sysid_smc::Series, start: &[f64]) {
-/// use sysid_pmcmc::{PmmhOptions, pmmh};
-/// let chains = pmmh(family, prior, data, start, &PmmhOptions::default(), 4, 1, &()).unwrap();
+/// use sysid_pmcmc::{ChainRun, PmmhOptions, pmmh};
+/// let chains = pmmh(family, prior, data, start, &PmmhOptions::default(), &ChainRun::new(4, 1))
+///     .unwrap();
 /// println!("acceptance {}", chains[0].acceptance_rate());
 /// # }
 /// ```
-#[allow(clippy::too_many_arguments)]
 pub fn pmmh<F: ModelFamily, P: Prior>(
     family: &F,
     prior: &P,
     data: &Series,
     start: &[f64],
     options: &PmmhOptions,
-    chains: usize,
-    seed: u64,
-    observer: &dyn ChainObserver,
+    run: &ChainRun<'_>,
 ) -> Result<Vec<Chain>, PmcmcError> {
     options.check(family.dim())?;
     check_start(family, start)?;
@@ -168,10 +167,28 @@ pub fn pmmh<F: ModelFamily, P: Prior>(
             reason: "the prior density is zero (or not finite) at the start".into(),
         });
     }
-    (0..chains)
+    let sampler = Pmmh {
+        family,
+        prior,
+        data,
+        start,
+        options,
+        run,
+    };
+    (0..run.chains)
         .into_par_iter()
-        .map(|c| run_chain(family, prior, data, start, options, c, seed, observer))
+        .map(|c| sampler.chain(c))
         .collect()
+}
+
+/// A PMMH run.
+struct Pmmh<'a, F, P> {
+    family: &'a F,
+    prior: &'a P,
+    data: &'a Series<'a>,
+    start: &'a [f64],
+    options: &'a PmmhOptions,
+    run: &'a ChainRun<'a>,
 }
 
 /// The state of a chain: parameters on both scales and the log-target pieces.
@@ -190,128 +207,130 @@ impl State {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn run_chain<F: ModelFamily, P: Prior>(
-    family: &F,
-    prior: &P,
-    data: &Series,
-    start: &[f64],
-    options: &PmmhOptions,
-    chain: usize,
-    seed: u64,
-    observer: &dyn ChainObserver,
-) -> Result<Chain, PmcmcError> {
-    let d = family.dim();
-    let transform = Transform::new(family.supports());
-    let mut rng = stream(seed, chain as u64);
-    let mut filter = ParticleFilter::new(FilterOptions {
-        particles: options.particles,
-        resampling: options.resampling,
-        // only the log-likelihood estimate is used
-        record_summaries: false,
-        ..Default::default()
-    })
-    .map_err(|source| PmcmcError::Smc {
-        chain,
-        iteration: 0,
-        source,
-    })?;
-    let mut z = vec![0.0; d];
-    transform
-        .to_unconstrained(start, &mut z)
-        .expect("the start was checked");
-    let mut current = State {
-        log_jacobian: transform.to_constrained(&z, &mut vec![0.0; d]),
-        z,
-        theta: start.to_vec(),
-        log_likelihood: 0.0,
-        log_prior: prior.log_density(start),
-    };
-    let model = family
-        .model(start)
-        .map_err(|reason| PmcmcError::InadmissibleStart { reason })?;
-    current.log_likelihood = match filter.run(&model, data, rng.random::<u64>()) {
-        Ok(run) => run.loglik,
-        Err(SmcError::DegenerateWeights { t }) => {
-            return Err(PmcmcError::InadmissibleStart {
-                reason: format!("the particle filter's weights vanish at time {t}"),
-            });
-        }
-        Err(source) => {
-            return Err(PmcmcError::Smc {
-                chain,
-                iteration: 0,
-                source,
-            });
-        }
-    };
-    let mut proposal = Proposal::new(options, d);
-    let mut out = ChainRecorder::new(
-        family.parameter_names(),
-        options.iterations,
-        options.burn_in,
-    );
-    let mut candidate = current.clone();
-    let mut noise = vec![0.0; d];
-    // the unconstrained draws, for adapting the proposal's shape during burn-in
-    let mut visited = Vec::with_capacity(options.burn_in * d);
-    let mut moves = 0usize;
-    for iteration in 0..options.iterations {
-        let adapting = options.adapt && iteration < options.burn_in;
-        if adapting && moves >= 2 * d {
-            proposal.adapt_shape(iteration, &visited);
-        }
-        for e in noise.iter_mut() {
-            *e = StandardNormal.sample(&mut rng);
-        }
-        proposal.step(&current.z, &noise, &mut candidate.z);
-        let filter_seed = rng.random::<u64>();
-        let uniform = rng.random::<f64>();
-        candidate.log_jacobian = transform.to_constrained(&candidate.z, &mut candidate.theta);
-        candidate.log_prior = prior.log_density(&candidate.theta);
-        let mut accepted = false;
-        if candidate.log_prior > f64::NEG_INFINITY
-            && let Ok(model) = family.model(&candidate.theta)
-        {
-            candidate.log_likelihood = match filter.run(&model, data, filter_seed) {
-                Ok(run) => run.loglik,
-                Err(SmcError::DegenerateWeights { .. }) => f64::NEG_INFINITY,
-                Err(source) => {
-                    return Err(PmcmcError::Smc {
-                        chain,
-                        iteration,
-                        source,
-                    });
-                }
-            };
-            let log_ratio = candidate.log_target() - current.log_target();
-            if adapting {
-                proposal.adapt_scale(iteration, log_ratio.min(0.0).exp());
+impl<F: ModelFamily, P: Prior> Pmmh<'_, F, P> {
+    /// Chain `chain`.
+    fn chain(&self, chain: usize) -> Result<Chain, PmcmcError> {
+        let Pmmh {
+            family,
+            prior,
+            data,
+            start,
+            options,
+            ..
+        } = *self;
+        let (seed, observer) = (self.run.seed, self.run.observer);
+        let d = family.dim();
+        let transform = Transform::new(family.supports());
+        let mut rng = stream(seed, chain as u64);
+        let mut filter = ParticleFilter::new(FilterOptions {
+            particles: options.particles,
+            resampling: options.resampling,
+            // only the log-likelihood estimate is used
+            record_summaries: false,
+            ..Default::default()
+        })
+        .map_err(|source| PmcmcError::Smc {
+            chain,
+            iteration: 0,
+            source,
+        })?;
+        let mut z = vec![0.0; d];
+        transform
+            .to_unconstrained(start, &mut z)
+            .expect("the start was checked");
+        let mut current = State {
+            log_jacobian: transform.to_constrained(&z, &mut vec![0.0; d]),
+            z,
+            theta: start.to_vec(),
+            log_likelihood: 0.0,
+            log_prior: prior.log_density(start),
+        };
+        let model = family
+            .model(start)
+            .map_err(|e| PmcmcError::InadmissibleStart { reason: e.reason })?;
+        current.log_likelihood = match filter.run(&model, data, rng.random::<u64>()) {
+            Ok(run) => run.loglik,
+            Err(SmcError::DegenerateWeights { t }) => {
+                return Err(PmcmcError::InadmissibleStart {
+                    reason: format!("the particle filter's weights vanish at time {t}"),
+                });
             }
-            if uniform.ln() < log_ratio {
-                std::mem::swap(&mut current, &mut candidate);
-                accepted = true;
-                moves += 1;
+            Err(source) => {
+                return Err(PmcmcError::Smc {
+                    chain,
+                    iteration: 0,
+                    source,
+                });
             }
-        } else if adapting {
-            proposal.adapt_scale(iteration, 0.0);
-        }
-        out.push(
-            &current.theta,
-            current.log_likelihood,
-            current.log_prior,
-            accepted,
+        };
+        let mut proposal = Proposal::new(options, d);
+        let mut out = ChainRecorder::new(
+            family.parameter_names(),
+            options.iterations,
+            options.burn_in,
         );
-        if adapting {
-            visited.extend_from_slice(&current.z);
+        let mut candidate = current.clone();
+        let mut noise = vec![0.0; d];
+        // the unconstrained draws, for adapting the proposal's shape during burn-in
+        let mut visited = Vec::with_capacity(options.burn_in * d);
+        let mut moves = 0usize;
+        for iteration in 0..options.iterations {
+            let adapting = options.adapt && iteration < options.burn_in;
+            if adapting && moves >= 2 * d {
+                proposal.adapt_shape(iteration, &visited);
+            }
+            for e in noise.iter_mut() {
+                *e = StandardNormal.sample(&mut rng);
+            }
+            proposal.step(&current.z, &noise, &mut candidate.z);
+            let filter_seed = rng.random::<u64>();
+            let uniform = rng.random::<f64>();
+            candidate.log_jacobian = transform.to_constrained(&candidate.z, &mut candidate.theta);
+            candidate.log_prior = prior.log_density(&candidate.theta);
+            let mut accepted = false;
+            if candidate.log_prior > f64::NEG_INFINITY
+                && let Ok(model) = family.model(&candidate.theta)
+            {
+                candidate.log_likelihood = match filter.run(&model, data, filter_seed) {
+                    Ok(run) => run.loglik,
+                    Err(SmcError::DegenerateWeights { .. }) => f64::NEG_INFINITY,
+                    Err(source) => {
+                        return Err(PmcmcError::Smc {
+                            chain,
+                            iteration,
+                            source,
+                        });
+                    }
+                };
+                let log_ratio = candidate.log_target() - current.log_target();
+                if adapting {
+                    proposal.adapt_scale(iteration, log_ratio.min(0.0).exp());
+                }
+                if uniform.ln() < log_ratio {
+                    std::mem::swap(&mut current, &mut candidate);
+                    accepted = true;
+                    moves += 1;
+                }
+            } else if adapting {
+                proposal.adapt_scale(iteration, 0.0);
+            }
+            out.push(
+                &current.theta,
+                current.log_likelihood,
+                current.log_prior,
+                accepted,
+            );
+            if adapting {
+                visited.extend_from_slice(&current.z);
+            }
+            observer.iteration(chain, iteration);
+            if observer.should_stop() && iteration + 1 < options.iterations {
+                out.interrupt();
+                break;
+            }
         }
-        observer.iteration(chain, iteration);
-        if observer.should_stop() && iteration + 1 < options.iterations {
-            out.interrupt();
-            break;
-        }
+        Ok(out.finish())
     }
-    Ok(out.finish())
 }
 
 /// The random-walk proposal `z* = z + lambda L e`.

@@ -87,3 +87,39 @@ pub enum SmcError {
         data: usize,
     },
 }
+
+/// Why a model cannot be built or used at the parameters given: a variance that is not
+/// positive, a value outside the model's domain, a draw that failed. A model family
+/// ([`sysid_pmcmc`'s `ModelFamily`], a model file) returns it for a parameter vector it
+/// does not admit; the samplers treat it inside a chain as zero posterior density.
+///
+/// The reason is the family's own words, shown to the user as written.
+///
+/// [`sysid_pmcmc`'s `ModelFamily`]: https://docs.rs/sysid-pmcmc
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{reason}")]
+pub struct ModelError {
+    /// What is wrong, in words.
+    pub reason: String,
+}
+
+impl ModelError {
+    /// The error with this reason.
+    pub fn new(reason: impl Into<String>) -> Self {
+        ModelError {
+            reason: reason.into(),
+        }
+    }
+}
+
+impl From<String> for ModelError {
+    fn from(reason: String) -> Self {
+        ModelError { reason }
+    }
+}
+
+impl From<&str> for ModelError {
+    fn from(reason: &str) -> Self {
+        ModelError::new(reason)
+    }
+}

@@ -46,7 +46,7 @@ pub mod weights;
 
 pub use conditional::{ConditionalSmc, CsmcKernel, CsmcSummary};
 pub use diagnostics::{FilterDiagnostics, FilterWarning, LOST_FRACTION, LOST_STEPS, SD_LIMIT};
-pub use error::SmcError;
+pub use error::{ModelError, SmcError};
 pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
 pub use guided::GuidedFilter;
 pub use history::History;
@@ -58,7 +58,7 @@ pub use normals::{add_scaled_normals, fill_standard_normals};
 pub use resample::Resampling;
 pub use series::Series;
 pub use smoother::{
-    AdditiveFunctional, EmSmoother, Ffbsi, FfbsiReject, Genealogy, Smoother, SmootherStats,
+    AdditiveFunctional, Ffbsi, FfbsiReject, Genealogy, PathSmoother, Smoother, SmootherStats,
     Tanizaki, Trajectories,
 };
 pub use streams::{Rng, stream};

@@ -1,11 +1,11 @@
 //! `sysid compare`: how well models reproduce a record, as MATLAB's `compare` does:
 //! the fit per output of the simulated (`--horizon inf`) or k-step predicted outputs.
 
-use super::{in_data, model_and_data, parse_initial};
+use super::{kalman_error, model_and_data, parse_initial};
 use crate::DataArgs;
 use crate::error::CliError;
-use std::path::PathBuf;
-use sysid::kalman::fit_percent;
+use std::path::{Path, PathBuf};
+use sysid::kalman::{Comparison, Horizon};
 use sysid_plot::{Figure, Panel, Series};
 
 /// Options of `sysid compare`.
@@ -41,26 +41,12 @@ pub struct Options {
     pub json: bool,
 }
 
-/// The horizon: `None` for the simulation, `Some(k)` for k-step predictions.
-fn parse_horizon(text: &str) -> Result<Option<usize>, CliError> {
-    let bad = |message: String| CliError::BadOption {
-        option: "--horizon",
-        message,
-    };
-    match text.trim() {
-        "inf" | "Inf" | "infinity" => Ok(None),
-        other => match other.parse::<usize>() {
-            Ok(0) => Err(bad("must be at least 1, or inf".into())),
-            Ok(k) => Ok(Some(k)),
-            Err(_) => Err(bad(format!(
-                "{other:?} is neither a positive integer nor inf"
-            ))),
-        },
-    }
-}
-
 pub fn run(o: &Options) -> Result<(), CliError> {
-    let horizon = parse_horizon(&o.horizon)?;
+    const OPTIONS: &[(&str, &str)] = &[("horizon", "--horizon"), ("burn_in", "--burn-in")];
+    let horizon: Horizon =
+        o.horizon
+            .parse()
+            .map_err(kalman_error(Path::new(""), &o.data.data, OPTIONS))?;
     parse_initial(&o.initial)?;
     if let Some(dir) = &o.out_dir {
         crate::files::refuse_existing(
@@ -77,41 +63,16 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let mut data = None;
     for path in &o.model {
         let (model, file) = model_and_data(path, &o.data, &o.initial)?;
-        if file.record.len() <= o.burn_in {
-            return Err(CliError::BadOption {
-                option: "--burn-in",
-                message: format!(
-                    "{} leaves no step of the record's {} to score",
-                    o.burn_in,
-                    file.record.len()
-                ),
-            });
-        }
-        let outputs = match horizon {
-            None => {
-                model
-                    .response(&file.record, None)
-                    .map_err(|source| CliError::Model {
-                        path: path.clone(),
-                        source,
-                    })?
-                    .outputs
-            }
-            Some(k) => {
-                model
-                    .predict(&file.record, k)
-                    .map_err(in_data(&o.data.data))?
-                    .mean
-            }
-        };
         // in the file's units (a model fitted with --detrend linear)
-        let outputs = file.restored(&outputs);
-        let fit = fit_percent(&file.measured(), &outputs, o.burn_in);
-        let mean = fit.iter().sum::<f64>() / fit.len() as f64;
+        let trend = file.trend.as_ref().map(|t| t.outputs_at(&file.time));
+        let comparison = model
+            .compare(&file.record, horizon, o.burn_in, trend.as_ref())
+            .map_err(kalman_error(path, &o.data.data, OPTIONS))?;
         rows.push(serde_json::json!({
-            "model": path, "fit_percent": fit, "fit_percent_mean": mean,
+            "model": path, "fit_percent": comparison.fit_percent,
+            "fit_percent_mean": comparison.mean_fit_percent(),
         }));
-        curves.push((path.display().to_string(), outputs, fit));
+        curves.push((path.display().to_string(), comparison));
         file_names.get_or_insert(file.output_names.clone());
         data.get_or_insert_with(|| {
             let mut original = file;
@@ -127,14 +88,14 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             path: dir.clone(),
             source,
         })?;
-        let figure = figure(&file, &names, &curves, o.burn_in, &o.horizon);
+        let figure = figure(&file, &names, &curves, o.burn_in, horizon);
         written = figure
             .write(dir, "compare", o.force)
             .map_err(CliError::Plot)?;
     }
     let what = match horizon {
-        None => "simulation".to_string(),
-        Some(k) => format!("{k}-step prediction"),
+        Horizon::Simulation => "simulation".to_string(),
+        Horizon::Steps(k) => format!("{k}-step prediction"),
     };
     crate::report(
         o.json,
@@ -144,10 +105,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         }),
         || {
             let mut text = format!("fit % ({what}, scored from step {}):", o.burn_in + 1);
-            for (path, _, fit) in &curves {
+            for (path, comparison) in &curves {
                 let per: Vec<String> = names
                     .iter()
-                    .zip(fit)
+                    .zip(&comparison.fit_percent)
                     .map(|(n, f)| format!("{n} {f:.2}"))
                     .collect();
                 text += &format!("\n  {path}: {}", per.join(", "));
@@ -162,9 +123,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
 fn figure(
     file: &crate::files::DataFile,
     names: &[String],
-    curves: &[(String, nalgebra::DMatrix<f64>, Vec<f64>)],
+    curves: &[(String, Comparison)],
     burn_in: usize,
-    horizon: &str,
+    horizon: Horizon,
 ) -> Figure {
     let panels = names
         .iter()
@@ -176,19 +137,16 @@ fn figure(
                     .filter(|(_, v)| v.is_finite())
                     .collect()
             };
-            let what = match parse_horizon(horizon) {
-                Ok(Some(1)) => "one-step predictions".to_string(),
-                Ok(Some(k)) => format!("{k}-step predictions"),
-                _ => "simulation".to_string(),
-            };
+            let what = horizon.to_string();
             let mut panel = Panel::new(
                 format!("{name}: measured and the models' {what}"),
                 "t",
                 name.clone(),
             )
             .with_series(Series::line("measured", points(&|t| file.record.y[(i, t)])).colour(0));
-            for (k, (path, outputs, fit)) in curves.iter().enumerate() {
-                let label = format!("{path}: fit {:.1} %", fit[i]);
+            for (k, (path, comparison)) in curves.iter().enumerate() {
+                let label = format!("{path}: fit {:.1} %", comparison.fit_percent[i]);
+                let outputs = &comparison.outputs;
                 panel = panel
                     .with_series(Series::line(label, points(&|t| outputs[(i, t)])).colour(k + 1));
             }

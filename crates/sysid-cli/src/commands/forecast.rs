@@ -3,7 +3,10 @@
 use super::in_data;
 use crate::error::CliError;
 use crate::files::{ColumnChoice, create_output, fmt, read_data};
-use statrs::distribution::{ContinuousCDF, Normal};
+use sysid::kalman::ForecastIntervals;
+
+/// The library's name of the option `--level`.
+const LEVEL: &[(&str, &str)] = &[("level", "--level")];
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -41,12 +44,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             message: "must be at least 1".into(),
         });
     }
-    if !(o.level > 0.0 && o.level < 1.0) {
-        return Err(CliError::BadOption {
-            option: "--level",
-            message: format!("{} is not a probability strictly between 0 and 1", o.level),
-        });
-    }
+    let level_error = super::kalman_error(&o.source.model, o.source.data_path(), LEVEL);
+    ForecastIntervals::half_width(o.level).map_err(&level_error)?;
     crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     let (model, file) = o.source.load()?;
     let future = match (&o.future_inputs, model.m()) {
@@ -96,7 +95,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     if let Some(trend) = &file.trend {
         forecast.mean += trend.outputs_at(&future_times);
     }
-    let z = Normal::standard().inverse_cdf(0.5 + o.level / 2.0);
+    let intervals = forecast.intervals(o.level).map_err(&level_error)?;
     let mut w = create_output(&o.out, o.force)?;
     let io = |source| CliError::Io {
         path: o.out.clone(),
@@ -115,8 +114,15 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     for j in 0..o.steps {
         let mut row = vec![(j + 1).to_string()];
         for i in 0..model.p() {
-            let (mean, sd) = (forecast.mean[(i, j)], forecast.sd[(i, j)]);
-            row.extend([mean, sd, mean - z * sd, mean + z * sd].map(fmt));
+            row.extend(
+                [
+                    forecast.mean[(i, j)],
+                    forecast.sd[(i, j)],
+                    intervals.lower[(i, j)],
+                    intervals.upper[(i, j)],
+                ]
+                .map(fmt),
+            );
         }
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
@@ -130,13 +136,13 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 forecast.mean[(i, o.steps - 1)],
                 forecast.sd[(i, o.steps - 1)],
             );
-            format!("{name} {mean:.6} ± {:.6}", z * sd)
+            format!("{name} {mean:.6} ± {:.6}", intervals.z * sd)
         })
         .collect();
     crate::report(
         o.json,
         serde_json::json!({
-            "command": "forecast", "steps": o.steps, "level": o.level, "z": z,
+            "command": "forecast", "steps": o.steps, "level": o.level, "z": intervals.z,
             "outputs": file.output_names, "out": o.out,
             "last": forecast.mean.column(o.steps - 1).iter().collect::<Vec<_>>(),
         }),

@@ -275,6 +275,31 @@ pub fn in_data(data: &Path) -> impl Fn(sysid::kalman::KalmanError) -> CliError +
     }
 }
 
+/// A library error of a record's computation: an out-of-range option named as the
+/// command line spells it (`options` pairs the library's name with the flag), a
+/// diverging simulation blamed on the model, anything else on the data file.
+pub fn kalman_error<'a>(
+    model: &'a Path,
+    data: &'a Path,
+    options: &'a [(&'static str, &'static str)],
+) -> impl Fn(sysid::kalman::KalmanError) -> CliError + 'a {
+    use sysid::kalman::KalmanError;
+    move |source| match source {
+        KalmanError::BadOption { name, message } => CliError::BadOption {
+            option: options
+                .iter()
+                .find(|(library, _)| *library == name)
+                .map_or(name, |(_, flag)| *flag),
+            message,
+        },
+        KalmanError::SimulationDiverges { .. } => CliError::Model {
+            path: model.to_path_buf(),
+            source,
+        },
+        source => in_data(data)(source),
+    }
+}
+
 /// After a run's outputs are written: Ctrl-C's error (exit 130, naming what was
 /// written) when it stopped the run, else `Ok`.
 pub fn interrupted<E>(

@@ -11,8 +11,8 @@ use std::path::PathBuf;
 use sysid::modelfile::ExprSmc;
 use sysid::models::{LinearGaussianSmc, Nlbench, lgss};
 use sysid::smc::{
-    Ffbsi, FfbsiReject, FilterModel, FilterOptions, Genealogy, ParticleFilter, Resampling, Series,
-    SmcError, Smoother, Tanizaki, TransitionBound,
+    FilterModel, FilterOptions, ParticleFilter, PathSmoother, Resampling, Series, SmcError,
+    Smoother, TransitionBound,
 };
 
 /// The model and the filter settings shared by `pf` and `psmooth`.
@@ -91,6 +91,7 @@ fn option_error(source: SmcError) -> CliError {
             "particles" => Some("--particles"),
             "ess_threshold" => Some("--ess"),
             "resampling" => Some("--resample"),
+            "method" => Some("--method"),
             _ => None,
         };
         if let Some(option) = flag {
@@ -376,6 +377,8 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
 ) -> Result<(), CliError> {
     let c = &a.common;
     let path_count = paths_of(&a.method, a.paths, c.particles)?;
+    let smoother = PathSmoother::from_name(&a.method, path_count, crate::threads() > 1)
+        .map_err(option_error)?;
     let options = filter_options(c, true)?;
     let names = state_names(&columns, model.state_dim());
     let file = read_series(c, columns)?;
@@ -400,43 +403,17 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     let context = c.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(option_error)?;
-    let parallel = crate::threads() > 1;
     let start = std::time::Instant::now();
     // the filter, the smoother, then the filter's repeats
     let progress = crate::progress::Progress::new(c.repeats as u64 + 2, "psmooth", c.json);
-    let (run, (paths, stats)) = (|| {
-        let run = pf
-            .run(model, &series, c.seed)
-            .map_err(smc_error(&context))?;
-        progress.inc(1);
-        let history = pf.history().expect("history stored");
-        let seed = c.seed.wrapping_add(1);
-        let smoothed = match a.method.as_str() {
-            "tanizaki" => Tanizaki {
-                parallel,
-                max_trials: None,
-            }
-            .trajectories(model, history, &series, seed),
-            "ffbsi" => Ffbsi { paths: path_count, parallel }.trajectories(model, history, &series, seed),
-            "ffbsi-reject" => FfbsiReject {
-                paths: path_count,
-                max_trials: None,
-                parallel,
-            }
-            .trajectories(model, history, &series, seed),
-            "genealogy" => Genealogy { paths: path_count }.trajectories(model, history, &series, seed),
-            other => {
-                return Err(CliError::BadOption {
-                    option: "--method",
-                    message: format!(
-                        "unknown smoother {other:?} (known: tanizaki, ffbsi, ffbsi-reject, genealogy)"
-                    ),
-                });
-            }
-        }
+    let run = pf
+        .run(model, &series, c.seed)
         .map_err(smc_error(&context))?;
-        Ok((run, smoothed))
-    })()?;
+    progress.inc(1);
+    let history = pf.history().expect("history stored");
+    let (paths, stats) = smoother
+        .trajectories(model, history, &series, c.seed.wrapping_add(1))
+        .map_err(smc_error(&context))?;
     // the smoothed paths are drawn from the filter's particles: a filter that lost the
     // state smooths the wrong trajectory there
     progress.inc(1);

@@ -19,8 +19,9 @@ use std::io::Write;
 use std::path::PathBuf;
 use sysid::models::{LgssConjugate, LgssFamily, NlbenchConjugate, NlbenchFamily};
 use sysid::pmcmc::{
-    Chain, ChainReport, CsmcKernel, GibbsOptions, IndependentPrior, MetropolisWithinGibbs,
-    ModelFamily, PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs, particle_gibbs_guided, pmmh,
+    Chain, ChainReport, ChainRun, CsmcKernel, GibbsOptions, IndependentPrior,
+    MetropolisWithinGibbs, ModelFamily, PmcmcError, PmmhOptions, ScalarPrior, particle_gibbs,
+    particle_gibbs_guided, pmmh,
 };
 use sysid::smc::Resampling;
 
@@ -150,9 +151,7 @@ type GibbsRunner<F, S> = fn(
     &sysid::smc::Series,
     &[f64],
     &GibbsOptions,
-    usize,
-    u64,
-    &dyn sysid::pmcmc::ChainObserver,
+    &ChainRun<'_>,
 ) -> Result<Vec<Chain>, PmcmcError>;
 
 /// The sampler for lgss: guided on request.
@@ -411,7 +410,12 @@ fn pmmh_with<F: ModelFamily>(
                 adapt: !a.no_adapt,
             };
             pmmh(
-                family, prior, series, start, &options, c.chains, c.seed, observer,
+                family,
+                prior,
+                series,
+                start,
+                &options,
+                &ChainRun::new(c.chains, c.seed).observed_by(observer),
             )
         },
     )
@@ -577,7 +581,13 @@ where
                 kernel,
             };
             run(
-                family, prior, step, series, start, &options, c.chains, c.seed, observer,
+                family,
+                prior,
+                step,
+                series,
+                start,
+                &options,
+                &ChainRun::new(c.chains, c.seed).observed_by(observer),
             )
         },
     )

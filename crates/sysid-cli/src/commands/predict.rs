@@ -71,28 +71,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     }
     w.commit()?;
     let fit = fit_percent(&file.measured(), &pred.mean, 0);
-    // the spread of the standardised errors: about 1 for a model that describes its
-    // own uncertainty
-    let spread: Vec<f64> = (0..model.p())
-        .map(|i| {
-            let seen: Vec<f64> = pred
-                .standardised
-                .row(i)
-                .iter()
-                .copied()
-                .filter(|v| v.is_finite())
-                .collect();
-            (seen.iter().map(|v| v * v).sum::<f64>() / seen.len().max(1) as f64).sqrt()
-        })
-        .collect();
-    let undetermined = pred.sd.iter().filter(|v| v.is_infinite()).count();
-    let mut warnings = Vec::new();
-    if undetermined > 0 {
-        warnings.push(format!(
-            "{undetermined} prediction(s) depend on the diffuse initial state before the data \
-             determine it: their standard deviation is inf"
-        ));
-    }
+    let spread = pred.standardised_rms();
+    let warnings: Vec<String> = pred.warnings().iter().map(ToString::to_string).collect();
     for w in &warnings {
         crate::warn(w);
     }

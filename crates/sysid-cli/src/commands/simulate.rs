@@ -27,7 +27,9 @@ pub struct Options {
     #[arg(long, requires = "model")]
     pub range: Option<String>,
     /// With --model: the initial state, `estimate` (least squares against the record's
-    /// outputs; the default when it has them), `model` (the model's mu) or `zero`.
+    /// outputs; the default when it has them), `model` (the model file's initial mean
+    /// for this record: its mu, or for `"initial": "stationary"` the stationary mean at
+    /// the record's first input) or `zero`.
     #[arg(long)]
     pub x0: Option<String>,
     /// With --model: one realisation with the model's process and measurement noise

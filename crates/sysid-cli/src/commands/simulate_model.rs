@@ -72,7 +72,13 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 .map_err(model_error)?
                 .initial_state
         }
-        "model" => model.mu().clone(),
+        // the file's initial state for this record (a stationary one at its first input)
+        "model" => stored
+            .initial
+            .apply_to_record(&model, &record)
+            .map_err(model_error)?
+            .mu()
+            .clone(),
         "zero" => DVector::zeros(model.n()),
         other => {
             return Err(CliError::BadOption {

@@ -2,6 +2,8 @@
 //! one-line error contract.
 #![allow(dead_code)]
 
+pub mod signals;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -36,8 +36,8 @@ pub use model::{AffineModel, AffineParams, free_structure};
 pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{
-    LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome, StartStatus,
-    describe, fit_robust, fit_robust_until,
+    LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustRun, RobustTiming, StartOutcome,
+    StartStatus, describe, fit_robust, fit_robust_until,
 };
 pub use stats::{AffineStatistics, StatisticsCollector};
 

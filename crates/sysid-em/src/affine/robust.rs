@@ -261,7 +261,7 @@ pub struct RobustFit {
     pub warnings: Vec<String>,
     /// Where the time went.
     pub timing: RobustTiming,
-    /// Whether [`fit_robust_until`]'s `stop` ended the run early.
+    /// Whether [`fit_robust_until`]'s [`RobustRun::stop`] ended the run early.
     pub interrupted: bool,
 }
 
@@ -294,17 +294,65 @@ where
     A: AffineModel,
     S: Smoother<A::Smc> + Clone + Send + Sync,
 {
-    fit_robust_until(model, data, start, spec, smoother, options, seed, &|| false)
+    fit_robust_until(
+        model,
+        data,
+        start,
+        spec,
+        smoother,
+        options,
+        &RobustRun::new(seed),
+    )
 }
 
-/// [`fit_robust`] that ends early when `stop()` turns true (e.g. on Ctrl-C), checked
+/// How a robust run goes: its seed (start `k` draws from the random stream
+/// `(seed, k)`), and when to end it early.
+#[derive(Clone, Copy)]
+pub struct RobustRun<'a> {
+    /// The seed of every random stream of the run.
+    pub seed: u64,
+    /// Asked after every EM iteration: `true` ends the run with what it has (a user's
+    /// Ctrl-C, a time budget).
+    pub stop: &'a (dyn Fn() -> bool + Sync),
+}
+
+/// The stop that never comes.
+fn never() -> bool {
+    false
+}
+
+impl RobustRun<'static> {
+    /// A run from `seed` that is never stopped early.
+    pub fn new(seed: u64) -> Self {
+        RobustRun { seed, stop: &never }
+    }
+}
+
+impl RobustRun<'_> {
+    /// The same run, ended early when `stop()` turns true.
+    pub fn stopped_by(self, stop: &(dyn Fn() -> bool + Sync)) -> RobustRun<'_> {
+        RobustRun {
+            seed: self.seed,
+            stop,
+        }
+    }
+}
+
+impl std::fmt::Debug for RobustRun<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RobustRun")
+            .field("seed", &self.seed)
+            .finish_non_exhaustive()
+    }
+}
+
+/// [`fit_robust`] that ends early when `run.stop()` turns true (e.g. on Ctrl-C), checked
 /// after every EM iteration: the exploration ends with the ranking so far, the
 /// refinement with the iterates so far, and the result (scored, averaged as usual) has
 /// [`RobustFit::interrupted`] set and says so in its warnings.
 ///
 /// # Errors
 /// As [`fit_robust`].
-#[allow(clippy::too_many_arguments)]
 pub fn fit_robust_until<A, S>(
     model: &A,
     data: Series<'_>,
@@ -312,13 +360,13 @@ pub fn fit_robust_until<A, S>(
     spec: &AffineEmSpec,
     smoother: &S,
     options: &RobustOptions,
-    seed: u64,
-    stop: &(dyn Fn() -> bool + Sync),
+    run: &RobustRun<'_>,
 ) -> Result<RobustFit, AffineEmError>
 where
     A: AffineModel,
     S: Smoother<A::Smc> + Clone + Send + Sync,
 {
+    let (seed, stop) = (run.seed, run.stop);
     options.check()?;
     model.smc_model(start)?;
     let explore_spec = AffineEmSpec {

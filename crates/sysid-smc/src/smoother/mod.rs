@@ -32,7 +32,7 @@
 
 mod alias;
 mod backward;
-mod em_choice;
+mod by_name;
 mod exact;
 mod genealogy;
 mod nearest;
@@ -42,7 +42,7 @@ mod rounds;
 mod window;
 
 pub use backward::PATH_BLOCK;
-pub use em_choice::EmSmoother;
+pub use by_name::PathSmoother;
 pub use paths::{AdditiveFunctional, Trajectories};
 
 use crate::model::{StateSpace, TransitionBound, TransitionDensity};

@@ -18,14 +18,14 @@ use crate::files::{DataFile, read_model, write_output};
 use std::path::Path;
 use sysid::em::affine::{
     AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, Psaem, RobustOptions,
-    StartStatus, StepSizes, describe, fit_robust_until,
+    RobustRun, StartStatus, StepSizes, describe, fit_robust_until,
 };
 use sysid::em::linear::Covariance;
 use sysid::em::{EmAlgorithm, EmObserver, IterationInfo, Termination, run_em};
 use sysid::kalman::ModelSpec;
 use sysid::modelfile::ExprAffine;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
-use sysid::smc::{EmSmoother, Smoother};
+use sysid::smc::{PathSmoother, SmcError, Smoother};
 
 /// The affine model chosen on the command line, with its starting parameters.
 enum Chosen {
@@ -182,7 +182,7 @@ pub fn run_file(o: &Options, affine: &ExprAffine, file: DataFile) -> Result<(), 
     let options = o.particle_em(1)?;
     let start = affine
         .params(&affine.file().free_values())
-        .map_err(|m| bad("--model", m))?;
+        .map_err(|m| bad("--model", m.reason))?;
     let job = Job { o, file, options };
     fit_with(&job, affine, start, affine.em_spec(), |p| affine.theta(p))
 }
@@ -229,16 +229,13 @@ where
 }
 
 /// `--smoother tanizaki|ffbsi-reject` (rejection FFBSi draws `--particles` paths).
-fn chosen_smoother(o: &Options) -> Result<EmSmoother, CliError> {
-    EmSmoother::from_name(&o.smoother, o.particles).ok_or_else(|| {
-        bad(
-            "--smoother",
-            format!(
-                "unknown smoother {:?} (known: {})",
-                o.smoother,
-                EmSmoother::NAMES.join(", ")
-            ),
-        )
+fn chosen_smoother(o: &Options) -> Result<PathSmoother, CliError> {
+    PathSmoother::for_em(&o.smoother, o.particles).map_err(|e| match e {
+        SmcError::InvalidOption { reason, .. } => bad("--smoother", reason),
+        other => CliError::Smc {
+            context: "--smoother".into(),
+            source: other,
+        },
     })
 }
 
@@ -500,8 +497,7 @@ where
         &spec,
         &smoother,
         &options,
-        o.seed,
-        &crate::progress::interrupted,
+        &RobustRun::new(o.seed).stopped_by(&crate::progress::interrupted),
     )
     .map_err(affine_error(&context))?;
     let seconds = began.elapsed().as_secs_f64();

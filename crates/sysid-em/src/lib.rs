@@ -7,12 +7,14 @@
 //! * [`gradient`]: particle EM with a BFGS M-step for any model with log-densities.
 
 pub mod affine;
+mod fit_run;
 pub mod gradient;
 pub mod linear;
 mod particle_pass;
 mod regression;
 pub mod runner;
 
+pub use fit_run::FitRun;
 pub use runner::{
     CheckedEmOptions, EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError,
     Termination, relative_change, remaining_gain, run_em,

@@ -66,6 +66,7 @@ pub mod affine;
 pub mod builtin;
 pub mod conjugate;
 pub mod expr;
+mod fit;
 pub mod gaussian;
 pub mod gradient;
 pub mod program;
@@ -76,6 +77,7 @@ mod write;
 
 pub use affine::ExprAffine;
 pub use conjugate::AffineConjugate;
+pub use fit::{FileFit, FileFitError, FileFitReport, FileFitWarning};
 pub use gaussian::{Gaussian, GaussianModel, GaussianSmc};
 pub use gradient::ExprGradient;
 pub use smc::ExprSmc;

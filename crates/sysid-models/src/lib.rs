@@ -22,6 +22,7 @@ mod nlbench;
 mod pendulum;
 mod truncated_normal;
 mod wiener;
+mod wiener_fit;
 mod wiener_guided;
 mod wiener_observations;
 mod wiener_start;
@@ -37,6 +38,7 @@ pub use wiener::{
     BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone,
     normalised_magnitude_error, saturation, spectral_magnitude, wiener_frequency_grid,
 };
+pub use wiener_fit::{WienerFit, WienerFitError, fit_wiener};
 pub use wiener_start::wiener_start;
 
 use nalgebra::{DMatrix, dmatrix};

@@ -25,6 +25,7 @@
 //! Schön, Wills and Ninness (2006), "Maximum likelihood nonlinear system estimation";
 //! ALGORITHMS.md 3.
 
+mod fit;
 mod model;
 mod moments;
 mod mstep;
@@ -32,12 +33,15 @@ mod psaem;
 mod robust;
 mod stats;
 
+pub use fit::{
+    AffineFit, AffineFitOptions, AffineFitReport, AffineMethod, CheckedAffineFitOptions, fit_affine,
+};
 pub use model::{AffineModel, AffineParams, free_structure};
 pub use mstep::m_step;
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{
-    LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustRun, RobustTiming, StartOutcome,
-    StartStatus, describe, fit_robust, fit_robust_until,
+    LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome, StartStatus,
+    describe, fit_robust, fit_robust_until,
 };
 pub use stats::{AffineStatistics, StatisticsCollector};
 
@@ -65,6 +69,14 @@ pub enum AffineEmError {
     /// Parameters the model cannot use (a non-positive variance, wrong shapes).
     #[error("invalid parameters: {0}")]
     InvalidParams(String),
+    /// An option out of its range.
+    #[error("{name}: {reason}")]
+    InvalidOption {
+        /// The option, as [`AffineFitOptions`] spells it.
+        name: &'static str,
+        /// What is wrong with its value.
+        reason: String,
+    },
     /// A combination the closed-form M-step does not cover.
     #[error("unsupported: {0}")]
     Unsupported(String),

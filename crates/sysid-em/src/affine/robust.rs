@@ -54,6 +54,7 @@
 
 use super::{AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure};
 use crate::EmAlgorithm;
+use crate::FitRun;
 use crate::linear::Covariance;
 use crate::particle_pass::ParticlePass;
 use nalgebra::DMatrix;
@@ -261,7 +262,7 @@ pub struct RobustFit {
     pub warnings: Vec<String>,
     /// Where the time went.
     pub timing: RobustTiming,
-    /// Whether [`fit_robust_until`]'s [`RobustRun::stop`] ended the run early.
+    /// Whether [`fit_robust_until`]'s [`FitRun::stop`] ended the run early.
     pub interrupted: bool,
 }
 
@@ -301,49 +302,8 @@ where
         spec,
         smoother,
         options,
-        &RobustRun::new(seed),
+        &FitRun::new(seed),
     )
-}
-
-/// How a robust run goes: its seed (start `k` draws from the random stream
-/// `(seed, k)`), and when to end it early.
-#[derive(Clone, Copy)]
-pub struct RobustRun<'a> {
-    /// The seed of every random stream of the run.
-    pub seed: u64,
-    /// Asked after every EM iteration: `true` ends the run with what it has (a user's
-    /// Ctrl-C, a time budget).
-    pub stop: &'a (dyn Fn() -> bool + Sync),
-}
-
-/// The stop that never comes.
-fn never() -> bool {
-    false
-}
-
-impl RobustRun<'static> {
-    /// A run from `seed` that is never stopped early.
-    pub fn new(seed: u64) -> Self {
-        RobustRun { seed, stop: &never }
-    }
-}
-
-impl RobustRun<'_> {
-    /// The same run, ended early when `stop()` turns true.
-    pub fn stopped_by(self, stop: &(dyn Fn() -> bool + Sync)) -> RobustRun<'_> {
-        RobustRun {
-            seed: self.seed,
-            stop,
-        }
-    }
-}
-
-impl std::fmt::Debug for RobustRun<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RobustRun")
-            .field("seed", &self.seed)
-            .finish_non_exhaustive()
-    }
 }
 
 /// [`fit_robust`] that ends early when `run.stop()` turns true (e.g. on Ctrl-C), checked
@@ -360,7 +320,7 @@ pub fn fit_robust_until<A, S>(
     spec: &AffineEmSpec,
     smoother: &S,
     options: &RobustOptions,
-    run: &RobustRun<'_>,
+    run: &FitRun<'_>,
 ) -> Result<RobustFit, AffineEmError>
 where
     A: AffineModel,

@@ -17,15 +17,16 @@ use crate::error::CliError;
 use crate::files::{DataFile, read_model, write_output};
 use std::path::Path;
 use sysid::em::affine::{
-    AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, Psaem, RobustOptions,
-    RobustRun, StartStatus, StepSizes, describe, fit_robust_until,
+    AffineEmError, AffineEmSpec, AffineFit, AffineFitOptions, AffineFitReport, AffineMethod,
+    AffineModel, AffineParams, CheckedAffineFitOptions, RobustFit, StartStatus, describe,
+    fit_affine,
 };
 use sysid::em::linear::Covariance;
-use sysid::em::{EmAlgorithm, EmObserver, IterationInfo, Termination, run_em};
+use sysid::em::{EmObserver, EmResult, FitRun, Termination};
 use sysid::kalman::ModelSpec;
 use sysid::modelfile::ExprAffine;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
-use sysid::smc::{PathSmoother, SmcError, Smoother};
+use sysid::smc::{PathSmoother, SmcError};
 
 /// The affine model chosen on the command line, with its starting parameters.
 enum Chosen {
@@ -103,30 +104,51 @@ fn choose(o: &Options, nlbench: bool) -> Result<Chosen, CliError> {
     Ok(Chosen::Linear(affine, params))
 }
 
-/// Records the estimate after every iteration.
-struct ParamTrace<F> {
-    row: F,
-    rows: Vec<Vec<f64>>,
-}
-
-impl<F: Fn(&AffineParams) -> Vec<f64>> EmObserver<AffineParams> for ParamTrace<F> {
-    fn iteration(&mut self, info: &IterationInfo<'_, AffineParams>) {
-        let mut row = vec![info.loglik];
-        row.extend((self.row)(info.estimate));
-        self.rows.push(row);
-    }
-}
-
 /// The command's settings and data, shared by the generic steps.
-struct Job<'a> {
-    o: &'a Options,
-    file: DataFile,
-    options: sysid::em::CheckedEmOptions,
+pub(super) struct Job<'a> {
+    pub(super) o: &'a Options,
+    pub(super) file: DataFile,
+    pub(super) options: CheckedAffineFitOptions,
+}
+
+/// The fit options of the command line (`--method`, `--particles`, `--smoother`,
+/// `--max-iter`, `--starts`), checked once, each error named by its flag.
+pub(super) fn fit_options(
+    o: &Options,
+    spec: AffineEmSpec,
+) -> Result<CheckedAffineFitOptions, CliError> {
+    let method = AffineMethod::from_name(&o.method).ok_or_else(|| {
+        bad(
+            "--method",
+            format!(
+                "unknown method {:?} (known: {})",
+                o.method,
+                AffineMethod::NAMES.join(", ")
+            ),
+        )
+    })?;
+    let mut options = AffineFitOptions::default().with_method(method);
+    options.spec = spec;
+    options.particles = o.particles;
+    options.smoother = chosen_smoother(o)?;
+    options.iterations = o.max_iter;
+    options.starts = o.starts;
+    options.check().map_err(|e| match e {
+        AffineEmError::InvalidOption { name, reason } => bad(
+            match name {
+                "particles" => "--particles",
+                "iterations" => "--max-iter",
+                _ => "--starts",
+            },
+            reason,
+        ),
+        other => affine_error("options")(other),
+    })
 }
 
 /// `sysid fit nlbench` / `sysid fit affine`.
 pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
-    let options = o.particle_em(1)?;
+    let options = fit_options(o, AffineEmSpec::default())?;
     let chosen = choose(o, nlbench)?;
     if matches!(chosen, Chosen::Linear(..)) && crate::commands::nonlinear::is_model_file(&o.out) {
         return Err(bad(
@@ -158,12 +180,16 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
         pi_y: free("r"),
         ..AffineEmSpec::default()
     };
+    let job = Job {
+        options: job.options.with_spec(spec),
+        ..job
+    };
     match chosen {
-        Chosen::Nlbench(start) => fit_with(&job, &NlbenchAffine, start, spec, |p| {
+        Chosen::Nlbench(start) => fit_with(&job, &NlbenchAffine, start, |p| {
             let n = NlbenchAffine::nlbench_params(p);
             vec![n.a, n.b, n.c, n.d, n.q, n.r]
         }),
-        Chosen::Linear(model, start) => fit_with(&job, &model, start, spec, |p| {
+        Chosen::Linear(model, start) => fit_with(&job, &model, start, |p| {
             p.beta_x
                 .iter()
                 .chain(p.beta_y.iter())
@@ -175,25 +201,38 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
     }
 }
 
-/// `sysid fit --model m.toml` for a model affine in its free parameters: closed-form
-/// particle EM (`--method robust`, `em` or `psaem`); which noise variances are
-/// estimated is the file's choice.
-pub fn run_file(o: &Options, affine: &ExprAffine, file: DataFile) -> Result<(), CliError> {
-    let options = o.particle_em(1)?;
-    let start = affine
-        .params(&affine.file().free_values())
-        .map_err(|m| bad("--model", m.reason))?;
-    let job = Job { o, file, options };
-    fit_with(&job, affine, start, affine.em_spec(), |p| affine.theta(p))
+/// The progress bar of a run: EM's and PSAEM's iterations (the robust driver runs its
+/// starts in parallel and has none).
+pub(super) fn progress_of(job: &Job) -> Option<crate::progress::Progress> {
+    let o = job.o;
+    let label = match job.options.options().method {
+        AffineMethod::Robust => return None,
+        AffineMethod::Em => o.smoother.as_str(),
+        _ => "psaem",
+    };
+    Some(crate::progress::Progress::new(
+        o.max_iter as u64,
+        label,
+        o.json,
+    ))
 }
 
-fn fit_with<A, F>(
-    job: &Job,
-    model: &A,
-    start: AffineParams,
-    spec: AffineEmSpec,
-    row: F,
-) -> Result<(), CliError>
+/// The progress bar as an observer of EM (none: an observer that does nothing).
+pub(super) fn observer_of<T>(
+    progress: &Option<crate::progress::Progress>,
+) -> Box<dyn EmObserver<T>> {
+    match progress {
+        Some(p) => Box::new(p.clone()),
+        None => Box::new(()),
+    }
+}
+
+/// The run of the command: its seed, stopped by Ctrl-C.
+pub(super) fn fit_run(o: &Options) -> FitRun<'static> {
+    FitRun::new(o.seed).stopped_by(&crate::progress::interrupted)
+}
+
+fn fit_with<A, F>(job: &Job, model: &A, start: AffineParams, row: F) -> Result<(), CliError>
 where
     A: AffineModel + ParamNames,
     A::Smc: sysid::smc::TransitionBound,
@@ -202,30 +241,50 @@ where
     let o = job.o;
     let context = o.data.data.display().to_string();
     let series = series_of(&job.file, &context)?;
-    match o.method.as_str() {
-        "em" => {}
-        "robust" => return fit_robust_with(job, model, start, spec, &series, row),
-        "psaem" => {
-            let psaem = Psaem::new(
-                model,
-                series,
-                o.particles,
-                StepSizes::default(),
-                spec,
-                o.seed,
-            )
-            .map_err(affine_error(&context))?;
-            return fit_with_algorithm(job, model, start, row, psaem, "psaem");
-        }
-        other => {
-            return Err(bad(
-                "--method",
-                format!("unknown method {other:?} (known: robust, em, psaem)"),
-            ));
+    let progress = progress_of(job);
+    let began = std::time::Instant::now();
+    // Ctrl-C ends EM, or the robust exploration or refinement, where it is; the result
+    // so far is written, marked interrupted
+    crate::progress::interruptible();
+    let mut observer = observer_of(&progress);
+    let fit = fit_affine(
+        model,
+        series,
+        start.clone(),
+        &job.options,
+        &fit_run(o),
+        observer.as_mut(),
+    )
+    .map_err(affine_error(&context))?;
+    if let Some(p) = &progress {
+        p.finish();
+    }
+    report(job, model, &start, &fit, began.elapsed().as_secs_f64(), row)
+}
+
+/// Writes the estimate (and the trace) of an affine fit, and reports.
+pub(super) fn report<A, F>(
+    job: &Job,
+    model: &A,
+    start: &AffineParams,
+    fit: &AffineFit,
+    seconds: f64,
+    row: F,
+) -> Result<(), CliError>
+where
+    A: ParamNames,
+    F: Fn(&AffineParams) -> Vec<f64>,
+{
+    match &fit.report {
+        AffineFitReport::Robust(robust) => report_robust(job, model, start, robust, seconds, row),
+        AffineFitReport::Em { result, iterates } => {
+            let method = match fit.method {
+                AffineMethod::Em => job.o.smoother.as_str(),
+                _ => "psaem",
+            };
+            report_em(job, model, start, result, iterates, method, row)
         }
     }
-    let smoother = chosen_smoother(o)?;
-    fit_with_smoother(job, model, start, spec, row, smoother)
 }
 
 /// `--smoother tanizaki|ffbsi-reject` (rejection FFBSi draws `--particles` paths).
@@ -240,7 +299,7 @@ fn chosen_smoother(o: &Options) -> Result<PathSmoother, CliError> {
 }
 
 /// Names of the columns of the parameter trace and the output file's contents.
-trait ParamNames {
+pub(super) trait ParamNames {
     fn names(&self, params: &AffineParams) -> Vec<String>;
     fn model_json(&self, params: &AffineParams) -> Result<serde_json::Value, CliError>;
 
@@ -359,58 +418,23 @@ impl ParamNames for LinearAffine {
     }
 }
 
-fn fit_with_smoother<A, F, S>(
+/// Writes what particle EM or PSAEM estimated and its trace, and reports.
+fn report_em<A, F>(
     job: &Job,
     model: &A,
-    start: AffineParams,
-    spec: AffineEmSpec,
-    row: F,
-    smoother: S,
-) -> Result<(), CliError>
-where
-    A: AffineModel + ParamNames,
-    F: Fn(&AffineParams) -> Vec<f64>,
-    S: Smoother<A::Smc>,
-{
-    let o = job.o;
-    let context = o.data.data.display().to_string();
-    let series = series_of(&job.file, &context)?;
-    let em = AffineEm::new(model, series, o.particles, smoother, spec, o.seed)
-        .map_err(affine_error(&context))?;
-    fit_with_algorithm(job, model, start, row, em, &o.smoother)
-}
-
-/// Runs a particle EM variant, writes the estimate and the trace, and reports.
-fn fit_with_algorithm<A, F, E>(
-    job: &Job,
-    model: &A,
-    start: AffineParams,
-    row: F,
-    mut em: E,
+    start: &AffineParams,
+    result: &EmResult<AffineParams, AffineEmError>,
+    iterates: &[(f64, AffineParams)],
     method: &str,
+    row: F,
 ) -> Result<(), CliError>
 where
-    A: AffineModel + ParamNames,
+    A: ParamNames,
     F: Fn(&AffineParams) -> Vec<f64>,
-    E: EmAlgorithm<Estimate = AffineParams, Error = AffineEmError>,
 {
     let o = job.o;
     let context = o.data.data.display().to_string();
-    let names = model.names(&start);
-    let mut trace = ParamTrace {
-        row,
-        rows: Vec::new(),
-    };
-    let progress =
-        crate::progress::Progress::new(job.options.max_iterations as u64, method, o.json);
-    crate::progress::interruptible();
-    let result = run_em(
-        &mut em,
-        start,
-        &job.options,
-        &mut (&mut trace, progress.clone()),
-    );
-    progress.finish();
+    let names = model.names(start);
     if let Termination::Error { iteration, error } = &result.termination {
         return Err(affine_error(&format!(
             "{context}, EM iteration {iteration}"
@@ -426,8 +450,9 @@ where
     write_output(&o.out, o.force, &text)?;
     if let Some(path) = &o.trace {
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
-        for (k, values) in trace.rows.iter().enumerate() {
-            let values: Vec<String> = values.iter().map(|v| v.to_string()).collect();
+        for (k, (loglik, estimate)) in iterates.iter().enumerate() {
+            let mut values = vec![loglik.to_string()];
+            values.extend(row(estimate).iter().map(|v| v.to_string()));
             text += &format!("{},{}\n", k + 1, values.join(","));
         }
         write_output(path, o.force, &text)?;
@@ -457,51 +482,23 @@ where
     )
 }
 
-/// `--method robust`: [`fit_robust`] with the command's smoother, starts, refinement
-/// particles and iterations; writes the estimate with the starts' table, the trace of
-/// the refinement, and reports the warnings.
-fn fit_robust_with<A, F>(
+/// `--method robust`: writes the estimate with the starts' table and the trace of the
+/// refinement, and reports the warnings.
+fn report_robust<A, F>(
     job: &Job,
     model: &A,
-    start: AffineParams,
-    spec: AffineEmSpec,
-    series: &sysid::smc::Series<'_>,
+    start: &AffineParams,
+    fit: &RobustFit,
+    seconds: f64,
     row: F,
 ) -> Result<(), CliError>
 where
-    A: AffineModel + ParamNames,
-    A::Smc: sysid::smc::TransitionBound,
+    A: ParamNames,
     F: Fn(&AffineParams) -> Vec<f64>,
 {
     let o = job.o;
-    let context = o.data.data.display().to_string();
-    if o.starts == 0 {
-        return Err(bad("--starts", "must be at least 1"));
-    }
-    let options = RobustOptions {
-        starts: o.starts,
-        refine_iterations: o.max_iter,
-        refine_particles: o.particles.max(2),
-        explore_particles: (o.particles / 2).max(2),
-        ..RobustOptions::default()
-    };
-    let smoother = chosen_smoother(o)?;
-    let began = std::time::Instant::now();
-    // Ctrl-C ends the exploration or the refinement where it is; the result so far is
-    // written, marked interrupted
-    crate::progress::interruptible();
-    let fit = fit_robust_until(
-        model,
-        *series,
-        &start,
-        &spec,
-        &smoother,
-        &options,
-        &RobustRun::new(o.seed).stopped_by(&crate::progress::interrupted),
-    )
-    .map_err(affine_error(&context))?;
-    let seconds = began.elapsed().as_secs_f64();
-    let names = model.names(&start);
+    let options = job.options.robust();
+    let names = model.names(start);
     let named = |p: &AffineParams| -> serde_json::Value {
         names
             .iter()

@@ -1,18 +1,19 @@
 //! `sysid fit --model m.toml`: the free parameters of a nonlinear model file,
-//! estimated from their values in the file. Closed-form particle EM when the equations
-//! are affine in them (seed 000; the robust driver by default), gradient EM otherwise
-//! (seed 001; rejection FFBSi with `--particles` paths, analytic gradients). The
-//! estimate is written as a model file that every nonlinear command reads.
+//! estimated from their values in the file by the library's [`ModelFile::fit`]:
+//! closed-form particle EM when the equations are affine in them (seed 000; the robust
+//! driver by default), gradient EM otherwise (seed 001; rejection FFBSi with
+//! `--particles` paths, analytic gradients). The estimate is written as a model file
+//! that every nonlinear command reads.
 
+use super::affine::{Job, fit_options, fit_run, observer_of, progress_of, report};
 use super::options::Options;
 use super::toml_metadata::metadata_lines;
 use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::{fmt, write_output};
-use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
-use sysid::em::{EmObserver, IterationInfo, Termination, run_em};
-use sysid::modelfile::ModelFile;
-use sysid::smc::FfbsiReject;
+use sysid::em::Termination;
+use sysid::em::affine::AffineEmSpec;
+use sysid::modelfile::{FileFit, FileFitError, FileFitReport, ModelFile};
 
 fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     CliError::BadOption {
@@ -28,114 +29,92 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .as_deref()
         .ok_or_else(|| bad("--model", "give a model file"))?;
     let model = crate::commands::nonlinear::read(path)?;
+    let options = fit_options(o, AffineEmSpec::default())?;
     if model.free_names().is_empty() {
-        return Err(bad(
-            "--model",
-            format!(
-                "{}: every parameter is fixed; nothing to estimate",
-                path.display()
-            ),
+        return Err(file_error(
+            o,
+            FileFitError::NothingFree {
+                origin: path.display().to_string(),
+            },
         ));
     }
     let file = o
         .data
         .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
-    match model.affine() {
-        Some(affine) => super::affine::run_file(o, &affine, file),
-        None => fit_gradient(o, &model, file),
-    }
-}
-
-/// Records the natural parameters and the log-likelihood estimate of every iteration.
-struct Trace<'a> {
-    model: &'a sysid::modelfile::ExprGradient,
-    rows: Vec<(f64, Vec<f64>)>,
-}
-
-impl EmObserver<Vec<f64>> for Trace<'_> {
-    fn iteration(&mut self, info: &IterationInfo<'_, Vec<f64>>) {
-        self.rows
-            .push((info.loglik, self.model.constrained(info.estimate)));
-    }
-}
-
-/// Gradient EM for a model that is not affine in its free parameters.
-fn fit_gradient(
-    o: &Options,
-    model: &ModelFile,
-    file: crate::files::DataFile,
-) -> Result<(), CliError> {
-    let method = match o.method.as_str() {
-        // the robust driver is the default of closed-form particle EM
-        "robust" | "em" => "gradient-em",
-        other => {
-            return Err(bad(
-                "--method",
-                format!(
-                    "{other:?}: {} is not affine in its free parameters ({}), so it is fitted by \
-                     gradient EM; use --method em",
-                    model.origin(),
-                    model.why_not_affine().unwrap_or_default()
-                ),
-            ));
-        }
-    };
-    let options = o.particle_em(2)?;
     let context = o.data.data.display().to_string();
-    let series = series_of(&file, &context)?;
-    let gradient = model.gradient();
-    let start = gradient.unconstrained(&model.free_values());
-    let smoother = FfbsiReject {
-        paths: o.particles,
-        max_trials: None,
-        parallel: false,
+    let job = Job { o, file, options };
+    let series = series_of(&job.file, &context)?;
+    let affine = model.affine();
+    let progress = match &affine {
+        Some(_) => progress_of(&job),
+        None => Some(crate::progress::Progress::new(
+            o.max_iter as u64,
+            "gradient EM",
+            o.json,
+        )),
     };
-    let em_error = |source| CliError::GradientEm {
-        context: context.clone(),
-        source,
-    };
-    let mut em = GradientEm::new(
-        &gradient,
-        series,
-        o.particles,
-        smoother,
-        MStepOptions::default(),
-        o.seed,
-    )
-    .map_err(em_error)?;
-    let mut trace = Trace {
-        model: &gradient,
-        rows: Vec::new(),
-    };
-    let progress = crate::progress::Progress::new(o.max_iter as u64, "gradient EM", o.json);
+    let began = std::time::Instant::now();
+    // Ctrl-C ends the run where it is; the result so far is written, marked interrupted
     crate::progress::interruptible();
-    let result = run_em(
-        &mut em,
-        start,
-        &options,
-        &mut (&mut trace, progress.clone()),
-    );
-    progress.finish();
+    let mut observer = observer_of(&progress);
+    let fit = model
+        .fit(series, &job.options, &fit_run(o), observer.as_mut())
+        .map_err(|e| file_error(o, e))?;
+    if let Some(p) = &progress {
+        p.finish();
+    }
+    let seconds = began.elapsed().as_secs_f64();
+    match (&fit.report, affine) {
+        (FileFitReport::Affine(report_of), Some(affine)) => {
+            let start = affine
+                .params(&model.free_values())
+                .map_err(|m| bad("--model", m.reason))?;
+            report(&job, &affine, &start, report_of, seconds, |p| {
+                affine.theta(p)
+            })
+        }
+        _ => report_gradient(o, &model, &fit),
+    }
+}
+
+/// A model file's fit error, named by the option or the data it comes from.
+fn file_error(o: &Options, e: FileFitError) -> CliError {
+    let context = o.data.data.display().to_string();
+    match e {
+        FileFitError::NothingFree { .. } => bad("--model", e.to_string()),
+        FileFitError::NotAffine { .. } => bad("--method", e.to_string()),
+        FileFitError::InvalidOption { reason, .. } => bad("--particles", reason),
+        FileFitError::Start(m) => bad("--model", m.reason),
+        FileFitError::Affine(source) => CliError::AffineEm { context, source },
+        FileFitError::Gradient(source) => CliError::GradientEm { context, source },
+        other => bad("--model", other.to_string()),
+    }
+}
+
+/// Writes the estimate of gradient EM and its trace, and reports.
+fn report_gradient(o: &Options, model: &ModelFile, fit: &FileFit) -> Result<(), CliError> {
+    let context = o.data.data.display().to_string();
+    let FileFitReport::Gradient { result, iterates } = &fit.report else {
+        unreachable!("a fit of a model that is not affine is gradient EM")
+    };
     if let Termination::Error { iteration, error } = &result.termination {
         return Err(CliError::GradientEm {
             context: format!("{context}, EM iteration {iteration}"),
             source: error.clone(),
         });
     }
-    let estimate = gradient.constrained(&result.estimate);
     let names = model.free_names();
-    let warnings = settling_warnings(&names, &trace.rows);
+    let warnings: Vec<String> = fit.warnings.iter().map(ToString::to_string).collect();
     let summary = serde_json::json!({
-        "method": method, "iterations": result.iterations, "particles": o.particles,
+        "method": fit.method(), "iterations": result.iterations, "particles": o.particles,
         "seed": o.seed, "loglik_estimate": result.loglik,
         "likelihood_decreases": result.decreases, "data": context,
-        "interrupted": matches!(result.termination, Termination::Interrupted { .. }),
+        "interrupted": fit.interrupted(),
     });
-    let fitted = model.with_values(&estimate);
-    let mut outputs = vec![(o.out.clone(), fitted.to_toml(&metadata_lines(&summary)))];
+    let mut outputs = vec![(o.out.clone(), fit.fitted.to_toml(&metadata_lines(&summary)))];
     if let Some(path) = &o.trace {
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
-        for (k, (l, values)) in trace.rows.iter().enumerate() {
+        for (k, (l, values)) in iterates.iter().enumerate() {
             let values: Vec<String> = values.iter().map(|&v| fmt(v)).collect();
             text += &format!("{},{},{}\n", k + 1, fmt(*l), values.join(","));
         }
@@ -153,7 +132,7 @@ fn fit_gradient(
     report["estimate"] = names
         .iter()
         .cloned()
-        .zip(&estimate)
+        .zip(&fit.estimate)
         .map(|(n, v)| (n, serde_json::json!(v)))
         .collect::<serde_json::Map<_, _>>()
         .into();
@@ -162,7 +141,7 @@ fn fit_gradient(
     crate::report(o.json, report, || {
         let values: Vec<String> = names
             .iter()
-            .zip(&estimate)
+            .zip(&fit.estimate)
             .map(|(n, v)| format!("{n} = {}", fmt(*v)))
             .collect();
         format!(
@@ -181,41 +160,4 @@ fn fit_gradient(
         &result.termination,
         outputs.into_iter().map(|(path, _)| path),
     )
-}
-
-/// A warning per parameter still drifting: over the last quarter of the iterations, its
-/// mean moved by more than 2 % (or 5 standard deviations of its iterates) against the
-/// quarter before. EM's iterates of a noisy E-step wander; a drift means more
-/// iterations are needed.
-fn settling_warnings(names: &[String], rows: &[(f64, Vec<f64>)]) -> Vec<String> {
-    let q = rows.len() / 4;
-    if q < 2 {
-        return vec![format!(
-            "only {} EM iterations: too few to tell whether the estimate has settled \
-             (use --max-iter 100 or more)",
-            rows.len()
-        )];
-    }
-    let last = &rows[rows.len() - q..];
-    let before = &rows[rows.len() - 2 * q..rows.len() - q];
-    let mut warnings = Vec::new();
-    for (k, name) in names.iter().enumerate() {
-        let stats = |part: &[(f64, Vec<f64>)]| {
-            let v: Vec<f64> = part.iter().map(|r| r.1[k]).collect();
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
-            (mean, var.sqrt())
-        };
-        let ((m1, _), (m2, sd2)) = (stats(before), stats(last));
-        let change = (m2 - m1).abs();
-        if change > 0.02 * m2.abs().max(1e-12) && change > 5.0 * sd2 / (q as f64).sqrt() {
-            warnings.push(format!(
-                "{name} is still moving ({} -> {} between the last two quarters of the \
-                 iterations): run more iterations (--max-iter)",
-                fmt(m1),
-                fmt(m2)
-            ));
-        }
-    }
-    warnings
 }

@@ -158,31 +158,6 @@ pub struct Options {
 }
 
 impl Options {
-    /// Particle EM's run settings: `--max-iter` iterations exactly (no tolerance),
-    /// with at least `min_particles` particles.
-    pub fn particle_em(
-        &self,
-        min_particles: usize,
-    ) -> Result<sysid::em::CheckedEmOptions, crate::error::CliError> {
-        use crate::error::CliError;
-        if self.particles < min_particles {
-            return Err(CliError::BadOption {
-                option: "--particles",
-                message: format!("must be at least {min_particles}"),
-            });
-        }
-        sysid::em::EmOptions {
-            max_iterations: self.max_iter,
-            tol: 0.0,
-            ..sysid::em::EmOptions::default()
-        }
-        .check()
-        .map_err(|e| CliError::BadOption {
-            option: "--max-iter",
-            message: e.to_string(),
-        })
-    }
-
     /// The defaults of every class, for these data and outputs.
     fn new(kind: Option<&str>, data: DataArgs, output: OutputArgs) -> Options {
         Options {

@@ -12,10 +12,9 @@ use super::options::Options;
 use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::write_output;
-use sysid::em::gradient::{GradientEm, GradientModel, MStepOptions};
-use sysid::em::{EmObserver, EmOptions, IterationInfo, Termination, run_em};
-use sysid::models::{WienerEstimate, WienerModel, normalised_magnitude_error, wiener_start};
-use sysid::smc::FfbsiReject;
+use sysid::em::gradient::GradientModel;
+use sysid::em::{FitRun, Termination};
+use sysid::models::{WienerFitError, WienerModel, fit_wiener};
 
 fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     CliError::BadOption {
@@ -24,21 +23,6 @@ fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     }
 }
 
-/// Collects `iteration, loglik, parameters...` rows for `--trace`.
-struct Trace<'m> {
-    model: &'m WienerModel,
-    rows: Vec<Vec<f64>>,
-}
-
-impl EmObserver<Vec<f64>> for Trace<'_> {
-    fn iteration(&mut self, info: &IterationInfo<'_, Vec<f64>>) {
-        let mut row = vec![info.loglik];
-        row.extend(self.model.constrained(info.estimate));
-        self.rows.push(row);
-    }
-}
-
-/// `sysid fit wiener`.
 pub fn run(o: &Options) -> Result<(), CliError> {
     if o.particles < 2 {
         return Err(bad("--particles", "must be at least 2"));
@@ -50,70 +34,39 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     crate::commands::check_column_counts(&file, 0, 2)?;
     let context = o.data.data.display().to_string();
     let series = series_of(&file, &context)?;
-    let outputs: Vec<f64> = file.record.y.as_slice().to_vec();
-    if outputs.iter().any(|v| v.is_nan()) {
-        return Err(bad(
-            "--data",
-            format!("{context}: the N4SID start needs every y1 and y2 (missing values found)"),
-        ));
-    }
-    let start = wiener_start(&outputs).map_err(|e| bad("--data", format!("{context}: {e}")))?;
-    let model = WienerModel::default();
-    let smoother = FfbsiReject {
-        paths: o.particles,
-        max_trials: None,
-        parallel: false,
-    };
-    let mut em = GradientEm::new(
-        &model,
+    let progress = crate::progress::Progress::new(o.max_iter as u64, "fit wiener", o.json);
+    crate::progress::interruptible();
+    let fit = fit_wiener(
         series,
         o.particles,
-        smoother,
-        MStepOptions::default(),
-        o.seed,
+        o.max_iter,
+        &FitRun::new(o.seed).stopped_by(&crate::progress::interrupted),
+        &mut progress.clone(),
     )
-    .map_err(|source| CliError::GradientEm {
-        context: "options".into(),
-        source,
-    })?
-    .with_guided_filter();
-    let options = EmOptions {
-        max_iterations: o.max_iter,
-        tol: 0.0,
-        ..EmOptions::default()
-    }
-    .check()
-    .map_err(|e| CliError::BadOption {
-        option: "--max-iter",
-        message: e.to_string(),
+    .map_err(|e| match e {
+        WienerFitError::InvalidOption { name, reason } => bad(
+            if name == "particles" {
+                "--particles"
+            } else {
+                "--max-iter"
+            },
+            reason,
+        ),
+        WienerFitError::Em(source) => CliError::GradientEm {
+            context: "options".into(),
+            source,
+        },
+        other => bad("--data", format!("{context}: {other}")),
     })?;
-    let mut trace = Trace {
-        model: &model,
-        rows: Vec::new(),
-    };
-    let theta = start.theta().map_err(|e| {
-        bad(
-            "--data",
-            format!("{context}: the N4SID start is unusable: {e}"),
-        )
-    })?;
-    let progress =
-        crate::progress::Progress::new(options.max_iterations as u64, "fit wiener", o.json);
-    crate::progress::interruptible();
-    let result = run_em(
-        &mut em,
-        theta,
-        &options,
-        &mut (&mut trace, progress.clone()),
-    );
     progress.finish();
+    let result = &fit.result;
     if let Termination::Error { iteration, error } = &result.termination {
         return Err(CliError::GradientEm {
             context: format!("{context}, EM iteration {iteration}"),
             source: error.clone(),
         });
     }
-    let e = WienerEstimate::from_theta(&result.estimate);
+    let e = &fit.estimate;
     // a breakpoint can run off to infinity (no data beyond it): written as "inf", not
     // as serde's silent null
     let numbers = |values: &[f64]| -> Vec<serde_json::Value> {
@@ -135,7 +88,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         "gradient_em": {"iterations": result.iterations, "particles": o.particles,
             "seed": o.seed, "loglik_estimate": result.loglik,
             "interrupted": matches!(result.termination, Termination::Interrupted { .. }),
-            "normalised_magnitude_error_vs_reference_system": normalised_magnitude_error(&e)},
+            "normalised_magnitude_error_vs_reference_system": fit.magnitude_error()},
     });
     write_output(
         &o.out,
@@ -143,11 +96,12 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         &(serde_json::to_string_pretty(&json).expect("serialises") + "\n"),
     )?;
     if let Some(path) = &o.trace {
-        let names = model.parameter_names();
+        let names = WienerModel::default().parameter_names();
         let mut text = format!("iteration,loglik,{}\n", names.join(","));
-        for (k, row) in trace.rows.iter().enumerate() {
-            let values: Vec<String> = row.iter().map(|v| v.to_string()).collect();
-            text += &format!("{},{}\n", k + 1, values.join(","));
+        for (k, (loglik, values)) in fit.iterates.iter().enumerate() {
+            let mut row = vec![loglik.to_string()];
+            row.extend(values.iter().map(|v| v.to_string()));
+            text += &format!("{},{}\n", k + 1, row.join(","));
         }
         write_output(path, o.force, &text)?;
     }

@@ -1,0 +1,339 @@
+//! Fitting a model file's free parameters: closed-form particle EM when the equations
+//! are affine in them (the robust driver by default, or plain EM, or PSAEM), gradient
+//! EM otherwise, with the report and the warnings the method gives.
+
+use crate::{ExprAffine, ModelFile};
+use sysid_em::affine::{
+    AffineEmError, AffineFit, AffineMethod, CheckedAffineFitOptions, fit_affine,
+};
+use sysid_em::gradient::{GradientEm, GradientEmError, GradientModel, MStepOptions};
+use sysid_em::{EmObserver, EmResult, FitRun, IterationInfo, Termination, run_em};
+use sysid_smc::{FfbsiReject, ModelError, Series};
+
+/// How a model file was fitted.
+#[derive(Debug, Clone)]
+pub enum FileFitReport {
+    /// Closed-form particle EM ([`fit_affine`]); estimates as the file's free values
+    /// through [`ExprAffine::theta`].
+    Affine(AffineFit),
+    /// Gradient EM with rejection FFBSi (`particles` paths) and analytic gradients.
+    Gradient {
+        /// The runner's result; its estimate is on the unconstrained scale.
+        result: EmResult<Vec<f64>, GradientEmError>,
+        /// `(loglik, free values)` after every iteration.
+        iterates: Vec<(f64, Vec<f64>)>,
+    },
+}
+
+/// The result of [`ModelFile::fit`].
+#[derive(Debug, Clone)]
+pub struct FileFit {
+    /// The model file with the estimates as its free parameters' values.
+    pub fitted: ModelFile,
+    /// The estimates, in the order of [`ModelFile::free_names`].
+    pub estimate: Vec<f64>,
+    /// What ran and what it says.
+    pub report: FileFitReport,
+    /// What should temper a reading of the estimate.
+    pub warnings: Vec<FileFitWarning>,
+}
+
+impl FileFit {
+    /// The method's name: `robust`, `em`, `psaem` or `gradient-em`.
+    pub fn method(&self) -> &'static str {
+        match &self.report {
+            FileFitReport::Affine(fit) => fit.method.name(),
+            FileFitReport::Gradient { .. } => "gradient-em",
+        }
+    }
+
+    /// The estimate's log-likelihood estimate (see [`AffineFit::loglik`]; for gradient
+    /// EM the last E-step's).
+    pub fn loglik(&self) -> Option<f64> {
+        match &self.report {
+            FileFitReport::Affine(fit) => fit.loglik(),
+            FileFitReport::Gradient { result, .. } => result.loglik,
+        }
+    }
+
+    /// Whether the run was ended early.
+    pub fn interrupted(&self) -> bool {
+        match &self.report {
+            FileFitReport::Affine(fit) => fit.interrupted(),
+            FileFitReport::Gradient { result, .. } => {
+                matches!(result.termination, Termination::Interrupted { .. })
+            }
+        }
+    }
+}
+
+/// Why a model file's fit should be read with care.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum FileFitWarning {
+    /// A warning of the robust driver (its text).
+    Robust(String),
+    /// Too few iterations to judge whether the iterates have settled.
+    TooFewIterations {
+        /// Iterations made.
+        iterations: usize,
+    },
+    /// A parameter whose mean moved by more than 2 % (and 5 standard errors) between
+    /// the last two quarters of the iterations: more iterations are needed.
+    StillMoving {
+        /// The parameter.
+        name: String,
+        /// Its mean over the quarter before the last.
+        from: f64,
+        /// Its mean over the last quarter.
+        to: f64,
+    },
+}
+
+impl std::fmt::Display for FileFitWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FileFitWarning::Robust(text) => f.write_str(text),
+            FileFitWarning::TooFewIterations { iterations } => write!(
+                f,
+                "only {iterations} EM iterations: too few to tell whether the estimate has \
+                 settled (use --max-iter 100 or more)"
+            ),
+            FileFitWarning::StillMoving { name, from, to } => write!(
+                f,
+                "{name} is still moving ({from} -> {to} between the last two quarters of the \
+                 iterations): run more iterations (--max-iter)"
+            ),
+        }
+    }
+}
+
+/// Errors of [`ModelFile::fit`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FileFitError {
+    /// Every parameter is fixed.
+    #[error("{origin}: every parameter is fixed; nothing to estimate")]
+    NothingFree {
+        /// The file.
+        origin: String,
+    },
+    /// A method the model does not admit (PSAEM or the robust driver for a model that
+    /// is not affine in its parameters).
+    #[error(
+        "{method:?}: {origin} is not affine in its free parameters ({why}), so it is fitted \
+         by gradient EM; use --method em"
+    )]
+    NotAffine {
+        /// The method asked for.
+        method: String,
+        /// The file.
+        origin: String,
+        /// Why it is not affine.
+        why: String,
+    },
+    /// An option out of its range for this model.
+    #[error("{name}: {reason}")]
+    InvalidOption {
+        /// The option, as [`sysid_em::affine::AffineFitOptions`] spells it.
+        name: &'static str,
+        /// What is wrong with its value.
+        reason: String,
+    },
+    /// The file's values are not a model (a variance that is not positive).
+    #[error("{0}")]
+    Start(#[from] ModelError),
+    /// Closed-form particle EM failed to start.
+    #[error("{0}")]
+    Affine(#[from] AffineEmError),
+    /// Gradient EM failed to start.
+    #[error("{0}")]
+    Gradient(#[from] GradientEmError),
+}
+
+/// Passes a model file's free values to the user's observer, and records them.
+struct Values<'o, 'r, F> {
+    observer: &'o mut dyn EmObserver<Vec<f64>>,
+    run: &'r FitRun<'r>,
+    values: F,
+    rows: Vec<(f64, Vec<f64>)>,
+}
+
+impl<T, F: Fn(&T) -> Vec<f64>> EmObserver<T> for Values<'_, '_, F> {
+    fn start(&mut self, initial: &T) {
+        self.observer.start(&(self.values)(initial));
+    }
+    fn iteration(&mut self, info: &IterationInfo<'_, T>) {
+        let values = (self.values)(info.estimate);
+        self.observer.iteration(&IterationInfo {
+            iteration: info.iteration,
+            loglik: info.loglik,
+            estimate: &values,
+            elapsed: info.elapsed,
+        });
+        self.rows.push((info.loglik, values));
+    }
+    fn finish(&mut self, estimate: &T, loglik: Option<f64>, iterations: usize) {
+        self.observer
+            .finish(&(self.values)(estimate), loglik, iterations);
+    }
+    fn should_stop(&self) -> bool {
+        self.observer.should_stop() || (self.run.stop)()
+    }
+}
+
+impl ModelFile {
+    /// Fits the free parameters to `data` from their values in the file: closed-form
+    /// particle EM by the method of `options` when the equations are affine in them
+    /// ([`fit_affine`], with the file's own choice of free noise blocks), gradient EM
+    /// otherwise (rejection FFBSi with `particles` paths, analytic gradients; the
+    /// methods `robust` and `em` both mean it). `observer` sees the free values after
+    /// every EM iteration; `run` gives the seed and the stop.
+    ///
+    /// # Errors
+    /// [`FileFitError::NothingFree`]; [`FileFitError::NotAffine`] for PSAEM on a model
+    /// that is not affine; the setup errors of the method. A failure inside EM's
+    /// iterations is the result's [`Termination::Error`].
+    pub fn fit(
+        &self,
+        data: Series<'_>,
+        options: &CheckedAffineFitOptions,
+        run: &FitRun<'_>,
+        observer: &mut dyn EmObserver<Vec<f64>>,
+    ) -> Result<FileFit, FileFitError> {
+        if self.free_names().is_empty() {
+            return Err(FileFitError::NothingFree {
+                origin: self.origin().to_string(),
+            });
+        }
+        match self.affine() {
+            Some(affine) => self.fit_affine(&affine, data, options, run, observer),
+            None => self.fit_gradient(data, options, run, observer),
+        }
+    }
+
+    fn fit_affine(
+        &self,
+        affine: &ExprAffine,
+        data: Series<'_>,
+        options: &CheckedAffineFitOptions,
+        run: &FitRun<'_>,
+        observer: &mut dyn EmObserver<Vec<f64>>,
+    ) -> Result<FileFit, FileFitError> {
+        let start = affine.params(&self.free_values())?;
+        let options = options.clone().with_spec(affine.em_spec());
+        let mut values = Values {
+            observer,
+            run,
+            values: |p: &sysid_em::affine::AffineParams| affine.theta(p),
+            rows: Vec::new(),
+        };
+        let fit = fit_affine(affine, data, start, &options, run, &mut values)?;
+        let estimate = affine.theta(fit.estimate());
+        let warnings = match &fit.report {
+            sysid_em::affine::AffineFitReport::Robust(r) => r
+                .warnings
+                .iter()
+                .cloned()
+                .map(FileFitWarning::Robust)
+                .collect(),
+            _ => Vec::new(),
+        };
+        Ok(FileFit {
+            fitted: self.with_values(&estimate),
+            estimate,
+            report: FileFitReport::Affine(fit),
+            warnings,
+        })
+    }
+
+    fn fit_gradient(
+        &self,
+        data: Series<'_>,
+        options: &CheckedAffineFitOptions,
+        run: &FitRun<'_>,
+        observer: &mut dyn EmObserver<Vec<f64>>,
+    ) -> Result<FileFit, FileFitError> {
+        let given = options.options();
+        if given.method == AffineMethod::Psaem {
+            return Err(FileFitError::NotAffine {
+                method: given.method.name().to_string(),
+                origin: self.origin().to_string(),
+                why: self.why_not_affine().unwrap_or_default(),
+            });
+        }
+        if given.particles < 2 {
+            return Err(FileFitError::InvalidOption {
+                name: "particles",
+                reason: "must be at least 2".into(),
+            });
+        }
+        let gradient = self.gradient();
+        let start = gradient.unconstrained(&self.free_values());
+        let smoother = FfbsiReject {
+            paths: given.particles,
+            max_trials: None,
+            parallel: false,
+        };
+        let mut em = GradientEm::new(
+            &gradient,
+            data,
+            given.particles,
+            smoother,
+            MStepOptions::default(),
+            run.seed,
+        )?;
+        let mut values = Values {
+            observer,
+            run,
+            values: |z: &Vec<f64>| gradient.constrained(z),
+            rows: Vec::new(),
+        };
+        let result = run_em(&mut em, start, options.em(), &mut values);
+        let estimate = gradient.constrained(&result.estimate);
+        let warnings = settling(&self.free_names(), &values.rows);
+        Ok(FileFit {
+            fitted: self.with_values(&estimate),
+            estimate,
+            report: FileFitReport::Gradient {
+                result,
+                iterates: values.rows,
+            },
+            warnings,
+        })
+    }
+}
+
+/// A warning per parameter still drifting: over the last quarter of the iterations,
+/// its mean moved by more than 2 % (and 5 standard errors of its iterates) against the
+/// quarter before. EM's iterates of a noisy E-step wander; a drift means more
+/// iterations are needed.
+fn settling(names: &[String], rows: &[(f64, Vec<f64>)]) -> Vec<FileFitWarning> {
+    let q = rows.len() / 4;
+    if q < 2 {
+        return vec![FileFitWarning::TooFewIterations {
+            iterations: rows.len(),
+        }];
+    }
+    let last = &rows[rows.len() - q..];
+    let before = &rows[rows.len() - 2 * q..rows.len() - q];
+    let mut warnings = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let stats = |part: &[(f64, Vec<f64>)]| {
+            let v: Vec<f64> = part.iter().map(|r| r.1[k]).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64;
+            (mean, var.sqrt())
+        };
+        let ((m1, _), (m2, sd2)) = (stats(before), stats(last));
+        let change = (m2 - m1).abs();
+        if change > 0.02 * m2.abs().max(1e-12) && change > 5.0 * sd2 / (q as f64).sqrt() {
+            warnings.push(FileFitWarning::StillMoving {
+                name: name.clone(),
+                from: m1,
+                to: m2,
+            });
+        }
+    }
+    warnings
+}

@@ -2,7 +2,6 @@
 //! [`FilterDiagnostics`] (log-likelihood sd from repeats, the smallest ESS, a lost
 //! state), with the steps named by the data file's times.
 
-use super::particle::ParticleArgs;
 use crate::files::fmt;
 use serde_json::json;
 use sysid::smc::{FilterDiagnostics, FilterModel, ParticleFilter, Series};
@@ -38,8 +37,8 @@ impl FilterTrust {
     }
 }
 
-/// Diagnoses the run of `pf` (log-likelihood `loglik`) with `args.repeats` more
-/// filters on streams derived from `args.seed`. `time` names the steps in the
+/// Diagnoses the run of `pf` (log-likelihood `loglik`) with `repeats` more
+/// filters on streams derived from `seed`. `time` names the steps in the
 /// messages (the data file's time; row numbers without one); `progress` advances by
 /// one per repeat.
 pub(crate) fn diagnose<M: FilterModel + Sync>(
@@ -47,14 +46,12 @@ pub(crate) fn diagnose<M: FilterModel + Sync>(
     series: &Series<'_>,
     pf: &ParticleFilter,
     loglik: f64,
-    args: &ParticleArgs,
+    (seed, repeats): (u64, usize),
     time: &[f64],
     progress: &crate::progress::Progress,
 ) -> FilterTrust {
     let diagnostics =
-        FilterDiagnostics::diagnose(model, series, pf, loglik, args.seed, args.repeats, || {
-            progress.inc(1)
-        });
+        FilterDiagnostics::diagnose(model, series, pf, loglik, seed, repeats, || progress.inc(1));
     let time_label = |t: usize| time.get(t).map_or_else(|| (t + 1).to_string(), |v| fmt(*v));
     let warnings = diagnostics
         .warnings

@@ -15,6 +15,7 @@ pub mod pmcmc;
 pub mod predict;
 pub mod resid;
 pub mod simulate;
+pub mod simulate_args;
 pub mod simulate_model;
 pub mod smooth;
 pub mod systems;

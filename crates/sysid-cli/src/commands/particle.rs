@@ -306,8 +306,15 @@ fn filter_with<M: FilterModel + Sync>(
         .run(model, &series, a.seed)
         .map_err(smc_error(&context))?;
     progress.inc(1);
-    let trust =
-        super::filter_trust::diagnose(model, &series, &pf, run.loglik, a, &file.time, &progress);
+    let trust = super::filter_trust::diagnose(
+        model,
+        &series,
+        &pf,
+        run.loglik,
+        (a.seed, a.repeats),
+        &file.time,
+        &progress,
+    );
     progress.finish();
     let seconds = start.elapsed().as_secs_f64();
     write_states(a, &file.time, &names, pf.means(), None)?;
@@ -417,8 +424,15 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     // the smoothed paths are drawn from the filter's particles: a filter that lost the
     // state smooths the wrong trajectory there
     progress.inc(1);
-    let trust =
-        super::filter_trust::diagnose(model, &series, &pf, run.loglik, c, &file.time, &progress);
+    let trust = super::filter_trust::diagnose(
+        model,
+        &series,
+        &pf,
+        run.loglik,
+        (c.seed, c.repeats),
+        &file.time,
+        &progress,
+    );
     progress.finish();
     let seconds = start.elapsed().as_secs_f64();
     let (means, sds) = (paths.means(), paths.std_devs());

@@ -1,6 +1,6 @@
 //! `sysid simulate --model M --data D`: a model's response to a record's inputs.
 
-use super::simulate::Options;
+use super::simulate_args::Options;
 use crate::error::CliError;
 use crate::files::{create_output, fmt, read_model_file};
 use nalgebra::DVector;
@@ -114,34 +114,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         Some(trend) => &record.u + trend.inputs_at(&file.time),
         None => record.u.clone(),
     };
-    let stored_names = stored
-        .metadata
-        .as_ref()
-        .map(|m| m.outputs.clone())
-        .filter(|names| names.len() == model.p());
-    let names: Vec<String> = if has_outputs {
-        file.output_names.clone()
-    } else if let Some(names) = stored_names {
-        names
-    } else {
-        (1..=model.p()).map(|i| format!("y{i}")).collect()
-    };
-    let mut w = create_output(&o.out, o.force)?;
-    let io = |source| CliError::Io {
-        path: o.out.clone(),
-        source,
-    };
-    let mut header = vec!["t".to_string()];
-    header.extend(file.input_names.iter().cloned());
-    header.extend(names.iter().cloned());
-    writeln!(w, "{}", header.join(",")).map_err(io)?;
-    for t in 0..record.len() {
-        let mut row = vec![file.label(t)];
-        row.extend(inputs.column(t).iter().map(|&v| fmt(v)));
-        row.extend(outputs.column(t).iter().map(|&v| fmt(v)));
-        writeln!(w, "{}", row.join(",")).map_err(io)?;
-    }
-    w.commit()?;
+    let names = output_names(&file, stored.metadata.as_ref(), model.p());
+    write_response(o, &file, &names, &inputs, &outputs)?;
     let fit = has_outputs.then(|| fit_percent(&file.measured(), &outputs, 0));
     crate::report(
         o.json,
@@ -171,6 +145,52 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             )
         },
     );
+    Ok(())
+}
+
+/// The names of the simulated outputs: the record's, else the model file's, else
+/// `y1..yp`.
+fn output_names(
+    file: &crate::files::DataFile,
+    metadata: Option<&sysid::kalman::Metadata>,
+    p: usize,
+) -> Vec<String> {
+    let stored = metadata
+        .map(|m| m.outputs.clone())
+        .filter(|names| names.len() == p);
+    if !file.output_names.is_empty() {
+        file.output_names.clone()
+    } else if let Some(names) = stored {
+        names
+    } else {
+        (1..=p).map(|i| format!("y{i}")).collect()
+    }
+}
+
+/// Writes the record's times and inputs with the simulated outputs.
+fn write_response(
+    o: &Options,
+    file: &crate::files::DataFile,
+    names: &[String],
+    inputs: &nalgebra::DMatrix<f64>,
+    outputs: &nalgebra::DMatrix<f64>,
+) -> Result<(), CliError> {
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    let mut header = vec!["t".to_string()];
+    header.extend(file.input_names.iter().cloned());
+    header.extend(names.iter().cloned());
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    for t in 0..inputs.ncols() {
+        let mut row = vec![file.label(t)];
+        row.extend(inputs.column(t).iter().map(|&v| fmt(v)));
+        row.extend(outputs.column(t).iter().map(|&v| fmt(v)));
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.commit()?;
     Ok(())
 }
 

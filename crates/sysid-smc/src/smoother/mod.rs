@@ -157,6 +157,49 @@ fn check_history(history: &History, data: &Series) -> Result<(), SmcError> {
     Ok(())
 }
 
+/// Implements [`Smoother`] for a backward smoother from what is its own: its number of
+/// paths, whether it draws path blocks in parallel, and its step kernel. The history is
+/// checked against the data, then the paths are drawn block by block
+/// ([`backward::trajectories`]) or the additive functional accumulated
+/// ([`backward::additive`]).
+macro_rules! backward_smoother {
+    (
+        impl Smoother<M> for $smoother:ty where M: [$($bound:tt)+];
+        |$s:ident, $model:ident, $history:ident, $data:ident| {
+            paths: $paths:expr,
+            parallel: $parallel:expr,
+            step: $step:expr $(,)?
+        }
+    ) => {
+        impl<M: $($bound)+> Smoother<M> for $smoother {
+            fn trajectories(
+                &self,
+                model: &M,
+                history: &History,
+                data: &Series,
+                seed: u64,
+            ) -> Result<(Trajectories, SmootherStats), SmcError> {
+                check_history(history, data)?;
+                let ($s, $model, $history, $data) = (self, model, history, data);
+                backward::trajectories($history, $paths, seed, $parallel, || $step)
+            }
+
+            fn additive<F: AdditiveFunctional + ?Sized>(
+                &self,
+                model: &M,
+                history: &History,
+                data: &Series,
+                seed: u64,
+                functional: &mut F,
+            ) -> Result<SmootherStats, SmcError> {
+                check_history(history, data)?;
+                let ($s, $model, $history, $data) = (self, model, history, data);
+                backward::additive($history, $paths, seed, $step, functional)
+            }
+        }
+    };
+}
+
 /// Ancestor tracing: follow the filter's genealogy back from `K` draws at `T - 1`.
 /// Cheap, but the paths collapse onto few ancestors far from `T` (path degeneracy).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -165,36 +208,12 @@ pub struct Genealogy {
     pub paths: usize,
 }
 
-impl<M: StateSpace> Smoother<M> for Genealogy {
-    fn trajectories(
-        &self,
-        _model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-    ) -> Result<(Trajectories, SmootherStats), SmcError> {
-        check_history(history, data)?;
-        backward::trajectories(history, self.paths, seed, false, || GenealogyStep {
-            history,
-        })
-    }
-
-    fn additive<F: AdditiveFunctional + ?Sized>(
-        &self,
-        _model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-        functional: &mut F,
-    ) -> Result<SmootherStats, SmcError> {
-        check_history(history, data)?;
-        backward::additive(
-            history,
-            self.paths,
-            seed,
-            GenealogyStep { history },
-            functional,
-        )
+backward_smoother! {
+    impl Smoother<M> for Genealogy where M: [StateSpace];
+    |genealogy, _model, history, _data| {
+        paths: genealogy.paths,
+        parallel: false,
+        step: GenealogyStep { history },
     }
 }
 
@@ -207,31 +226,12 @@ pub struct Ffbsi {
     pub parallel: bool,
 }
 
-impl<M: TransitionDensity + Sync> Smoother<M> for Ffbsi {
-    fn trajectories(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-    ) -> Result<(Trajectories, SmootherStats), SmcError> {
-        check_history(history, data)?;
-        backward::trajectories(history, self.paths, seed, self.parallel, || {
-            ExactStep::new(model, history, data, Cloud::Weighted)
-        })
-    }
-
-    fn additive<F: AdditiveFunctional + ?Sized>(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-        functional: &mut F,
-    ) -> Result<SmootherStats, SmcError> {
-        check_history(history, data)?;
-        let step = ExactStep::new(model, history, data, Cloud::Weighted);
-        backward::additive(history, self.paths, seed, step, functional)
+backward_smoother! {
+    impl Smoother<M> for Ffbsi where M: [TransitionDensity + Sync];
+    |ffbsi, model, history, data| {
+        paths: ffbsi.paths,
+        parallel: ffbsi.parallel,
+        step: ExactStep::new(model, history, data, Cloud::Weighted),
     }
 }
 
@@ -282,31 +282,12 @@ impl Tanizaki {
     }
 }
 
-impl<M: TransitionDensity + Sync> Smoother<M> for Tanizaki {
-    fn trajectories(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-    ) -> Result<(Trajectories, SmootherStats), SmcError> {
-        check_history(history, data)?;
-        backward::trajectories(history, history.particles(), seed, self.parallel, || {
-            self.step(model, history, data)
-        })
-    }
-
-    fn additive<F: AdditiveFunctional + ?Sized>(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-        functional: &mut F,
-    ) -> Result<SmootherStats, SmcError> {
-        check_history(history, data)?;
-        let step = self.step(model, history, data);
-        backward::additive(history, history.particles(), seed, step, functional)
+backward_smoother! {
+    impl Smoother<M> for Tanizaki where M: [TransitionDensity + Sync];
+    |tanizaki, model, history, data| {
+        paths: history.particles(),
+        parallel: tanizaki.parallel,
+        step: tanizaki.step(model, history, data),
     }
 }
 
@@ -343,30 +324,11 @@ impl FfbsiReject {
     }
 }
 
-impl<M: TransitionBound + Sync> Smoother<M> for FfbsiReject {
-    fn trajectories(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-    ) -> Result<(Trajectories, SmootherStats), SmcError> {
-        check_history(history, data)?;
-        backward::trajectories(history, self.paths, seed, self.parallel, || {
-            self.step(model, history, data)
-        })
-    }
-
-    fn additive<F: AdditiveFunctional + ?Sized>(
-        &self,
-        model: &M,
-        history: &History,
-        data: &Series,
-        seed: u64,
-        functional: &mut F,
-    ) -> Result<SmootherStats, SmcError> {
-        check_history(history, data)?;
-        let step = self.step(model, history, data);
-        backward::additive(history, self.paths, seed, step, functional)
+backward_smoother! {
+    impl Smoother<M> for FfbsiReject where M: [TransitionBound + Sync];
+    |reject, model, history, data| {
+        paths: reject.paths,
+        parallel: reject.parallel,
+        step: reject.step(model, history, data),
     }
 }

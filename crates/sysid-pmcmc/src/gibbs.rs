@@ -164,21 +164,8 @@ pub fn particle_gibbs<F: ModelFamily, P: Prior, S: ParameterStep<F>>(
     options: &GibbsOptions,
     run: &ChainRun<'_>,
 ) -> Result<Vec<Chain>, PmcmcError> {
-    let sweep = |csmc: &mut ConditionalSmc,
-                 model: &F::Model,
-                 reference: Option<&[f64]>,
-                 out: &mut [f64],
-                 rng: &mut Rng| csmc.sample(model, data, reference, out, rng);
-    Gibbs {
-        family,
-        prior,
-        step,
-        data,
-        start,
-        options,
-        run,
-    }
-    .chains(&sweep)
+    Gibbs::new(family, prior, step, data, start, options, run)
+        .chains(&|csmc, model, reference, out, rng| csmc.sample(model, data, reference, out, rng))
 }
 
 /// As [`particle_gibbs`], with the conditional SMC's locally optimal proposal
@@ -200,22 +187,9 @@ where
     P: Prior,
     S: ParameterStep<F>,
 {
-    let sweep =
-        |csmc: &mut ConditionalSmc,
-         model: &F::Model,
-         reference: Option<&[f64]>,
-         out: &mut [f64],
-         rng: &mut Rng| csmc.sample_guided(model, data, reference, out, rng);
-    Gibbs {
-        family,
-        prior,
-        step,
-        data,
-        start,
-        options,
-        run,
-    }
-    .chains(&sweep)
+    Gibbs::new(family, prior, step, data, start, options, run).chains(
+        &|csmc, model, reference, out, rng| csmc.sample_guided(model, data, reference, out, rng),
+    )
 }
 
 /// One conditional SMC sweep (bootstrap or guided).
@@ -251,7 +225,28 @@ struct Gibbs<'a, F, P, S> {
     run: &'a ChainRun<'a>,
 }
 
-impl<F: ModelFamily, P: Prior, S: ParameterStep<F>> Gibbs<'_, F, P, S> {
+impl<'a, F: ModelFamily, P: Prior, S: ParameterStep<F>> Gibbs<'a, F, P, S> {
+    /// The run of `step` and `prior` on `data` from `start`.
+    fn new(
+        family: &'a F,
+        prior: &'a P,
+        step: &'a S,
+        data: &'a Series<'a>,
+        start: &'a [f64],
+        options: &'a GibbsOptions,
+        run: &'a ChainRun<'a>,
+    ) -> Self {
+        Gibbs {
+            family,
+            prior,
+            step,
+            data,
+            start,
+            options,
+            run,
+        }
+    }
+
     /// Checks the options and the start, then runs the chains in parallel.
     fn chains(&self, sweep: &Sweep<'_, F::Model>) -> Result<Vec<Chain>, PmcmcError> {
         check_options(self.options)?;

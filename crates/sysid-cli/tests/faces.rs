@@ -400,7 +400,10 @@ fn pf_and_its_diagnostics_equal_the_library() {
 /// it wrote.
 #[test]
 fn pmmh_summary_and_warnings_are_the_library_report_of_its_chains() {
-    use sysid::pmcmc::{Chain, ChainReport};
+    use sysid::models::LgssFamily;
+    use sysid::pmcmc::{
+        Chain, ChainReport, ChainRun, IndependentPrior, ModelFamily, PmmhOptions, pmmh,
+    };
     let dir = scratch_dir();
     let (data, chains_file) = (dir.join("d.csv"), dir.join("chains.json"));
     assert_ok(&sysid(&[
@@ -474,6 +477,34 @@ fn pmmh_summary_and_warnings_are_the_library_report_of_its_chains() {
         assert_eq!(json["rhat"].as_f64(), Some(s.rhat));
         assert_eq!(json["ess_bulk"].as_f64(), Some(s.ess_bulk));
     }
+    // the chains themselves are the library's pmmh with the command's options
+    let (burn_in, seed) = (
+        summary["burn_in"].as_u64().unwrap() as usize,
+        summary["seed"].as_u64().unwrap(),
+    );
+    let y: Vec<f64> = read_csv(&data, None).record.y.iter().copied().collect();
+    let family = LgssFamily::default();
+    let prior = IndependentPrior::new(
+        &family.parameter_names(),
+        LgssFamily::DEFAULT_PRIORS.to_vec(),
+    )
+    .unwrap();
+    let options = PmmhOptions {
+        iterations: 300,
+        burn_in,
+        particles: 30,
+        ..PmmhOptions::default()
+    };
+    let library = pmmh(
+        &family,
+        &prior,
+        &sysid::smc::Series::new(&y, 1).unwrap(),
+        &[0.5, 1.0, 1.0],
+        &options,
+        &ChainRun::new(2, seed),
+    )
+    .unwrap();
+    assert_eq!(written["chains"], serde_json::to_value(&library).unwrap());
 }
 
 /// `sysid n4sid --order auto` and `sysid loglik` give the library's numbers and

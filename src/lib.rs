@@ -37,22 +37,28 @@ pub use sysid_subspace as subspace;
 
 /// The names most programs need.
 pub mod prelude {
-    pub use crate::kalman::{
-        KalmanError, KalmanWorkspace, LinearGaussianModel, ModelSpec, Record, SmootherOutput,
-        SufficientStatistics,
+    pub use crate::em::affine::{AffineFit, AffineFitOptions, AffineMethod, fit_affine};
+    pub use crate::em::linear::{
+        LinearFit, LinearFitOptions, LinearFitWarning, OrderChoice, Selection, Signals, Start,
     };
-    pub use crate::models::{LinearGaussianSmc, Nlbench, NlbenchParams, System};
+    pub use crate::em::{EmObserver, EmOptions, FitRun, Termination, run_em};
+    pub use crate::kalman::{
+        Comparison, Horizon, KalmanError, KalmanWorkspace, LinearGaussianModel, ModelSpec, Record,
+        SmootherOutput, SufficientStatistics, Trend, TrendKind,
+    };
+    pub use crate::modelfile::{FileFit, FileFitWarning, Gaussian, GaussianModel, ModelFile};
+    pub use crate::models::{LinearGaussianSmc, Nlbench, NlbenchParams, System, fit_wiener};
     pub use crate::pmcmc::{
-        Chain, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions, ScalarPrior,
-        particle_gibbs, pmmh, summarise,
+        Chain, ChainReport, ChainRun, GibbsOptions, IndependentPrior, ModelFamily, PmmhOptions,
+        ScalarPrior, particle_gibbs, pmmh, summarise,
     };
     pub use crate::smc::{
-        FilterOptions, ParticleFilter, Resampling, Series, SmcError, Smoother, Trajectories,
+        FilterDiagnostics, FilterOptions, ModelError, ParticleFilter, PathSmoother, Resampling,
+        Series, SmcError, Smoother, Trajectories,
     };
+    pub use crate::subspace::{N4sidOptions, n4sid};
 }
 
-/// The Rust code blocks of `docs/guide.md`, compiled and run by `cargo test` as
-/// doctests (its shell commands run in `crates/sysid-cli/tests/documented.rs`).
 #[cfg(doctest)]
 #[doc = include_str!("../docs/guide.md")]
 pub struct GuideDoctests;

@@ -213,6 +213,11 @@ fn not_a_linear_model(path: &Path, text: &str, error: &serde_json::Error) -> Cli
         .and_then(|v| v.get("system"))
         .and_then(|s| s.as_str());
     let message = match system {
+        Some("wiener") => {
+            "a `sysid fit wiener` estimate (JSON), not a model file: the blind Wiener \
+             system's parameters and their magnitude error, which no command runs as a model"
+                .to_string()
+        }
         Some(system) => format!(
             "a `sysid fit {system}` estimate (JSON), not a linear model file: fit again with \
              --out FILE.toml for a model file, which pf, psmooth, pmmh, pgas and simulate \

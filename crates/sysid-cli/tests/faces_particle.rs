@@ -195,3 +195,67 @@ fn pgas_equals_particle_gibbs_with_the_conjugate_step() {
     let warnings: Vec<String> = report.warnings.iter().map(ToString::to_string).collect();
     assert_eq!(summary["warnings"], serde_json::json!(warnings));
 }
+
+#[test]
+fn simulate_model_file_equals_the_library_realisation() {
+    use sysid::modelfile::ModelFile;
+    let dir = scratch_dir();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/models/oscillator.toml");
+    let out = dir.join("osc.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "--model",
+        s(&path),
+        "--steps",
+        "120",
+        "--seed",
+        "3",
+        "--states",
+        "--out",
+        s(&out),
+    ]));
+    let file = ModelFile::read(&path).unwrap();
+    let (states, outputs) = file
+        .at(&file.free_values())
+        .unwrap()
+        .simulate(120, &[], 3)
+        .unwrap();
+    assert_eq!(bits(&column(&out, "y")), bits(&outputs));
+    let p: Vec<f64> = states.chunks_exact(2).map(|x| x[0]).collect();
+    assert_eq!(bits(&column(&out, "p")), bits(&p));
+}
+
+#[test]
+fn a_wiener_estimate_is_json_and_says_what_it_is() {
+    let dir = scratch_dir();
+    let (data, _) = simulated(&dir, "wiener", 100, 3);
+    let refused = sysid(&[
+        "fit",
+        "wiener",
+        "--data",
+        s(&data),
+        "--iters",
+        "2",
+        "--particles",
+        "10",
+        "--out",
+        s(&dir.join("w.toml")),
+    ]);
+    common::assert_one_line_error(&refused, &["--out", "name it .json"]);
+    assert!(!dir.join("w.toml").exists());
+    let json = dir.join("w.json");
+    assert_ok(&sysid(&[
+        "fit",
+        "wiener",
+        "--data",
+        s(&data),
+        "--iters",
+        "2",
+        "--particles",
+        "10",
+        "--out",
+        s(&json),
+    ]));
+    let pf = sysid(&["pf", "--model", s(&json), "--data", s(&data)]);
+    common::assert_one_line_error(&pf, &["`sysid fit wiener` estimate", "no command runs as a model"]);
+}

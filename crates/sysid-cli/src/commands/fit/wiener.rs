@@ -30,6 +30,13 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     if o.max_iter == 0 {
         return Err(bad("--iters", "must be at least 1"));
     }
+    if crate::commands::nonlinear::is_model_file(&o.out) {
+        return Err(bad(
+            "--out",
+            "the Wiener estimate is written as JSON (name it .json): the blind Wiener system \
+             has no model file",
+        ));
+    }
     let file = o.data.read()?;
     crate::commands::check_column_counts(&file, 0, 2)?;
     let context = o.data.data.display().to_string();

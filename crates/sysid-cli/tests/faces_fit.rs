@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use sysid::em::FitRun;
 use sysid::em::affine::{AffineFitOptions, AffineMethod, fit_affine};
 use sysid::modelfile::ModelFile;
-use sysid::models::{NlbenchAffine, NlbenchParams, fit_wiener};
+use sysid::models::{NlbenchAffine, NlbenchParams, WienerFitOptions, fit_wiener};
 use sysid::smc::{PathSmoother, Series};
 
 /// The guide's oscillator model file (affine in k and c).
@@ -214,7 +214,14 @@ fn fit_wiener_equals_the_library() {
         "--json",
     ]);
     let summary = json_of(&run);
-    let fit = fit_wiener(Series::new(&y, 2).unwrap(), 20, 3, &FitRun::new(4), &mut ()).unwrap();
+    let options = WienerFitOptions::new(20, 3).check().unwrap();
+    let fit = fit_wiener(
+        Series::new(&y, 2).unwrap(),
+        &options,
+        &FitRun::new(4),
+        &mut (),
+    )
+    .unwrap();
     assert_eq!(
         numbers(&summary["r"]),
         fit.estimate

@@ -257,5 +257,8 @@ fn a_wiener_estimate_is_json_and_says_what_it_is() {
         s(&json),
     ]));
     let pf = sysid(&["pf", "--model", s(&json), "--data", s(&data)]);
-    common::assert_one_line_error(&pf, &["`sysid fit wiener` estimate", "no command runs as a model"]);
+    common::assert_one_line_error(
+        &pf,
+        &["`sysid fit wiener` estimate", "no command runs as a model"],
+    );
 }

@@ -38,7 +38,9 @@ pub use wiener::{
     BlindWiener, WienerEstimate, WienerModel, WienerSimulation, WienerSmc, dead_zone,
     normalised_magnitude_error, saturation, spectral_magnitude, wiener_frequency_grid,
 };
-pub use wiener_fit::{WienerFit, WienerFitError, fit_wiener};
+pub use wiener_fit::{
+    CheckedWienerFitOptions, WienerFit, WienerFitError, WienerFitOptions, fit_wiener,
+};
 pub use wiener_start::wiener_start;
 
 use nalgebra::{DMatrix, dmatrix};

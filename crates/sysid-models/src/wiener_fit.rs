@@ -3,7 +3,7 @@
 
 use crate::{WienerEstimate, WienerModel, normalised_magnitude_error, wiener_start};
 use sysid_em::gradient::{GradientEm, GradientEmError, GradientModel, MStepOptions};
-use sysid_em::{EmObserver, EmOptions, EmResult, FitRun, IterationInfo, run_em};
+use sysid_em::{CheckedEmOptions, EmObserver, EmOptions, EmResult, FitRun, IterationInfo, run_em};
 use sysid_smc::{FfbsiReject, ModelError, Series};
 
 /// Errors of [`fit_wiener`].
@@ -78,38 +78,94 @@ impl EmObserver<Vec<f64>> for Iterates<'_, '_> {
     }
 }
 
+/// Options of [`fit_wiener`]; [`WienerFitOptions::check`] gives the only form it takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct WienerFitOptions {
+    /// Particles of the filter and paths of the rejection FFBSi (at least 2). Default
+    /// 100.
+    pub particles: usize,
+    /// Gradient-EM iterations, run exactly (at least 1). Default 500.
+    pub iterations: usize,
+}
+
+impl Default for WienerFitOptions {
+    fn default() -> Self {
+        WienerFitOptions {
+            particles: 100,
+            iterations: 500,
+        }
+    }
+}
+
+impl WienerFitOptions {
+    /// `particles` and `iterations`, the rest default.
+    pub fn new(particles: usize, iterations: usize) -> Self {
+        WienerFitOptions {
+            particles,
+            iterations,
+        }
+    }
+
+    /// Checks the options.
+    ///
+    /// # Errors
+    /// [`WienerFitError::InvalidOption`] naming `particles` (below 2) or `iterations`
+    /// (none).
+    pub fn check(self) -> Result<CheckedWienerFitOptions, WienerFitError> {
+        if self.particles < 2 {
+            return Err(WienerFitError::InvalidOption {
+                name: "particles",
+                reason: "must be at least 2".into(),
+            });
+        }
+        if self.iterations == 0 {
+            return Err(WienerFitError::InvalidOption {
+                name: "iterations",
+                reason: "must be at least 1".into(),
+            });
+        }
+        let em = EmOptions {
+            max_iterations: self.iterations,
+            tol: 0.0,
+            ..EmOptions::default()
+        }
+        .check()
+        .map_err(|e| WienerFitError::InvalidOption {
+            name: "iterations",
+            reason: e.to_string(),
+        })?;
+        Ok(CheckedWienerFitOptions {
+            particles: self.particles,
+            em,
+        })
+    }
+}
+
+/// [`WienerFitOptions`] that passed their checks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedWienerFitOptions {
+    particles: usize,
+    em: CheckedEmOptions,
+}
+
 /// Fits the Wiener system of seed 001 to `data` (two outputs, no input): the start is
 /// the lecture's (the linear part from N4SID on `y1`, `r1 = r2 = 0.1`, each breakpoint
-/// a tenth of the reference system's), then `iterations` gradient-EM iterations with
-/// `particles` filter particles and as many rejection-FFBSi paths, the fully adapted
-/// filter in the E-step. `observer` sees every iteration (unconstrained estimates).
+/// a tenth of the reference system's), then the iterations of gradient EM with the
+/// particles of `options` in the filter and as many rejection-FFBSi paths, the fully
+/// adapted filter in the E-step. `observer` sees every iteration (unconstrained
+/// estimates).
 ///
 /// # Errors
 /// See [`WienerFitError`]; a failure inside the iterations is the result's
 /// termination.
 pub fn fit_wiener(
     data: Series<'_>,
-    particles: usize,
-    iterations: usize,
+    options: &CheckedWienerFitOptions,
     run: &FitRun<'_>,
     observer: &mut dyn EmObserver<Vec<f64>>,
 ) -> Result<WienerFit, WienerFitError> {
-    if particles < 2 {
-        return Err(WienerFitError::InvalidOption {
-            name: "particles",
-            reason: "must be at least 2".into(),
-        });
-    }
-    let options = EmOptions {
-        max_iterations: iterations,
-        tol: 0.0,
-        ..EmOptions::default()
-    }
-    .check()
-    .map_err(|e| WienerFitError::InvalidOption {
-        name: "iterations",
-        reason: e.to_string(),
-    })?;
+    let particles = options.particles;
     let outputs: Vec<f64> = (0..data.steps())
         .flat_map(|t| data.output(t).iter().copied())
         .collect();
@@ -139,7 +195,7 @@ pub fn fit_wiener(
         run,
         rows: Vec::new(),
     };
-    let result = run_em(&mut em, theta, &options, &mut iterates);
+    let result = run_em(&mut em, theta, &options.em, &mut iterates);
     Ok(WienerFit {
         estimate: WienerEstimate::from_theta(&result.estimate),
         iterates: iterates.rows,

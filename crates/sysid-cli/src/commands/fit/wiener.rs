@@ -14,7 +14,7 @@ use crate::error::CliError;
 use crate::files::write_output;
 use sysid::em::gradient::GradientModel;
 use sysid::em::{FitRun, Termination};
-use sysid::models::{WienerFitError, WienerModel, fit_wiener};
+use sysid::models::{WienerFitError, WienerFitOptions, WienerModel, fit_wiener};
 
 fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     CliError::BadOption {
@@ -23,13 +23,29 @@ fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     }
 }
 
+/// A Wiener fit's error, named by the option or the data file (`context`).
+fn wiener_error(context: &str) -> impl Fn(WienerFitError) -> CliError + '_ {
+    move |e| match e {
+        WienerFitError::InvalidOption { name, reason } => bad(
+            if name == "particles" {
+                "--particles"
+            } else {
+                "--iters"
+            },
+            reason,
+        ),
+        WienerFitError::Em(source) => CliError::GradientEm {
+            context: "options".into(),
+            source,
+        },
+        other => bad("--data", format!("{context}: {other}")),
+    }
+}
+
 pub fn run(o: &Options) -> Result<(), CliError> {
-    if o.particles < 2 {
-        return Err(bad("--particles", "must be at least 2"));
-    }
-    if o.max_iter == 0 {
-        return Err(bad("--iters", "must be at least 1"));
-    }
+    let options = WienerFitOptions::new(o.particles, o.max_iter)
+        .check()
+        .map_err(wiener_error(""))?;
     if crate::commands::nonlinear::is_model_file(&o.out) {
         return Err(bad(
             "--out",
@@ -45,26 +61,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     crate::progress::interruptible();
     let fit = fit_wiener(
         series,
-        o.particles,
-        o.max_iter,
+        &options,
         &FitRun::new(o.seed).stopped_by(&crate::progress::interrupted),
         &mut progress.clone(),
     )
-    .map_err(|e| match e {
-        WienerFitError::InvalidOption { name, reason } => bad(
-            if name == "particles" {
-                "--particles"
-            } else {
-                "--max-iter"
-            },
-            reason,
-        ),
-        WienerFitError::Em(source) => CliError::GradientEm {
-            context: "options".into(),
-            source,
-        },
-        other => bad("--data", format!("{context}: {other}")),
-    })?;
+    .map_err(wiener_error(&context))?;
     progress.finish();
     let result = &fit.result;
     if let Termination::Error { iteration, error } = &result.termination {

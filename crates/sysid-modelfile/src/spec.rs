@@ -370,6 +370,10 @@ impl ModelSpec {
                     ),
                 ));
             }
+            if let Some(prior) = &p.prior {
+                check_prior(prior, &p)
+                    .map_err(|m| at.error(offset, format!("parameter {name}: {m}")))?;
+            }
             parameters.push(p);
         }
 
@@ -723,4 +727,40 @@ fn check_finite(
         return Err(at.error(s.base + bad.span.0, format!("{what}: yields {v} {where_}")));
     }
     Ok(())
+}
+
+/// A parameter's prior checked when the file is read: its settings (a positive sd or
+/// scale, a shape above 0, `low < high`, finite numbers); for a free parameter, a
+/// bounded prior (beta, uniform) that covers the parameter's range, and mass at its
+/// value. (A prior on (0, inf) over an unbounded parameter stays allowed: the samplers
+/// reject the proposals below 0.)
+fn check_prior(prior: &ScalarPrior, p: &Parameter) -> Result<(), String> {
+    prior.check(&p.name).map_err(|e| match e {
+        sysid_pmcmc::PmcmcError::InvalidPrior { reason, .. } => format!("prior: {reason}"),
+        other => format!("prior: {other}"),
+    })?;
+    if p.fixed {
+        return Ok(());
+    }
+    let (low, high) = range_of(prior.support());
+    let (min, max) = range_of(p.support);
+    if matches!(prior.support(), Support::Interval(..)) && (min < low || max > high) {
+        return Err(format!(
+            "prior: the prior lives on ({low}, {high}) but the parameter's bounds allow \
+             ({min}, {max}): give it min = {low}, max = {high}"
+        ));
+    }
+    if !prior.support().contains(p.value) || !prior.log_density(p.value).is_finite() {
+        return Err(format!("prior: no mass at the value {}", p.value));
+    }
+    Ok(())
+}
+
+/// The interval a support spans.
+fn range_of(support: Support) -> (f64, f64) {
+    match support {
+        Support::Real => (f64::NEG_INFINITY, f64::INFINITY),
+        Support::Positive => (0.0, f64::INFINITY),
+        Support::Interval(a, b) => (a, b),
+    }
 }

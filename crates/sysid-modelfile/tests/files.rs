@@ -201,6 +201,55 @@ fn every_malformed_file_gets_one_line_with_its_line_and_column() {
             (7, 7),
             "expected a number (fixed) or a table",
         ),
+        // priors, checked when read (not first by pmmh)
+        (
+            edit(
+                "a = { value = 0.5 }",
+                "a = { value = 0.5, prior = { family = \"normal\", mean = 0.0, sd = -1.0 } }",
+            ),
+            (7, 5),
+            "parameter a: prior:",
+        ),
+        (
+            edit(
+                "a = { value = 0.5 }",
+                "a = { value = 0.5, prior = { family = \"gamma\", shape = 0.0, rate = 1.0 } }",
+            ),
+            (7, 5),
+            "parameter a: prior:",
+        ),
+        (
+            edit(
+                "a = { value = 0.5 }",
+                "a = { value = 0.5, prior = { family = \"uniform\", low = 1.0, high = 0.0 } }",
+            ),
+            (7, 5),
+            "parameter a: prior:",
+        ),
+        (
+            edit(
+                "a = { value = 0.5 }",
+                "a = { value = 0.5, prior = { family = \"normal\", mean = nan, sd = 1.0 } }",
+            ),
+            (7, 5),
+            "parameter a: prior:",
+        ),
+        (
+            edit(
+                "a = { value = 0.5 }",
+                "a = { value = 0.5, prior = { family = \"beta\", a = 2.0, b = 2.0 } }",
+            ),
+            (7, 5),
+            "give it min = 0, max = 1",
+        ),
+        (
+            edit(
+                "a = { value = 0.5 }",
+                "a = { value = -0.5, prior = { family = \"gamma\", shape = 2.0, rate = 1.0 } }",
+            ),
+            (7, 5),
+            "no mass at the value -0.5",
+        ),
     ];
     assert!(cases.len() >= 15);
     let mut wrong = Vec::new();

@@ -645,3 +645,32 @@ fn smoothed_states_keep_the_model_s_names_and_plot_draws_their_truth() {
         "one truth per state panel"
     );
 }
+
+/// A bad cell in a column the model file names is reported as the cell it is (file,
+/// line, column), not as a file without input or output columns.
+#[test]
+fn a_bad_cell_in_a_named_column_is_named() {
+    let dir = scratch_dir();
+    let model = dir.join("osc.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let data = dir.join("osc.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--steps",
+        "20",
+        "--out",
+        s(&data),
+    ]);
+    let text = std::fs::read_to_string(&data).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut cells: Vec<&str> = lines[5].split(',').collect();
+    *cells.last_mut().unwrap() = "abc";
+    lines[5] = cells.join(",");
+    std::fs::write(&data, lines.join("\n") + "\n").unwrap();
+    for command in ["pf", "psmooth", "pmmh"] {
+        let out = sysid(&[command, "--model", s(&model), "--data", s(&data)]);
+        assert_one_line_error(&out, &["osc.csv, line 6, column y", "cannot read \"abc\""]);
+    }
+}

@@ -81,8 +81,10 @@ impl DataArgs {
             };
             match self.read_columns(Some(&names), false) {
                 Ok(file) => file,
-                // a record with the default column names (y1, u1, ...)
-                Err(_) => self.read()?,
+                // the model's names are not the file's: a record with the default
+                // column names (y1, u1, ...); any other fault (a bad cell) is the file's
+                Err(CliError::UnknownColumn { .. }) => self.read()?,
+                Err(other) => return Err(other),
             }
         } else {
             self.read()?

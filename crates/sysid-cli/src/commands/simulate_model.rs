@@ -229,13 +229,16 @@ fn run_model_file(o: &Options, path: &std::path::Path) -> Result<(), CliError> {
                 range: o.range.clone(),
                 ts: None,
             };
-            let record = data.read().or_else(|_| {
-                crate::DataArgs {
+            // the model's input names, else the default ones (u1, ...); a bad cell is
+            // the file's fault either way
+            let record = match data.read() {
+                Err(CliError::UnknownColumn { .. }) => crate::DataArgs {
                     inputs: None,
                     ..data.clone()
                 }
-                .read()
-            })?;
+                .read(),
+                read => read,
+            }?;
             super::check_column_counts(&record, spec.inputs.len(), 0)?;
             let u: Vec<f64> = record.record.u.iter().copied().collect();
             (record.record.len(), u, record.time.clone())

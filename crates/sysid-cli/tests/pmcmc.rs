@@ -356,3 +356,46 @@ fn pgas_on_nlbench_moves_every_parameter() {
         "{mh}"
     );
 }
+
+/// Ctrl-C inside the burn-in: the chains made so far are written, the report says how
+/// many iterations ran and that there are no draws to summarise (no table of NaN).
+#[test]
+fn a_sampler_interrupted_in_its_burn_in_says_so_instead_of_a_table_of_nan() {
+    let dir = scratch_dir();
+    let data = simulate(&dir, "lgss", 200, 1);
+    let chains = dir.join("chains.csv");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args([
+            "pmmh",
+            "--system",
+            "lgss",
+            "--data",
+            s(&data),
+            "--iters",
+            "1000000",
+            "--chains",
+            "2",
+            "--out",
+            s(&chains),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let out = child.wait_with_output().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("no draws to summarise"), "{stderr}");
+    assert!(stdout.contains("of 1000000 iterations (interrupted)"), "{stdout}");
+    assert!(!stdout.contains("NaN"), "{stdout}");
+    assert!(chains.exists());
+}

@@ -26,6 +26,14 @@ pub enum ChainWarning {
     FewDraws(Vec<(String, f64, f64)>),
     /// PMMH acceptance below [`ACCEPTANCE_LIMIT`] (the lowest over the chains).
     LowAcceptance(f64),
+    /// The chains stopped (a user's Ctrl-C) before the end of their burn-in: no draw
+    /// to summarise.
+    NoDraws {
+        /// Iterations the shortest chain made.
+        iterations: usize,
+        /// The burn-in.
+        burn_in: usize,
+    },
 }
 
 impl std::fmt::Display for ChainWarning {
@@ -58,6 +66,14 @@ impl std::fmt::Display for ChainWarning {
                     list.join(", ")
                 )
             }
+            ChainWarning::NoDraws {
+                iterations,
+                burn_in,
+            } => write!(
+                f,
+                "the chains stopped after {iterations} iterations, inside their burn-in of \
+                 {burn_in}: no draws to summarise"
+            ),
             ChainWarning::LowAcceptance(lowest) => write!(
                 f,
                 "acceptance {lowest:.3} below {ACCEPTANCE_LIMIT}: the chain barely moves \
@@ -100,6 +116,8 @@ pub struct ChainReport {
     pub min_state_update_rate: Option<f64>,
     /// Why the summaries should not be trusted.
     pub warnings: Vec<ChainWarning>,
+    /// Iterations made by the shortest chain (fewer than asked when interrupted).
+    pub iterations: usize,
 }
 
 impl ChainReport {
@@ -107,6 +125,20 @@ impl ChainReport {
     /// rank-normalised R-hat above 1.01 (several chains), bulk or tail effective sample
     /// size below 400 (Vehtari et al. 2021), PMMH acceptance below 0.05.
     pub fn of(chains: &[Chain]) -> ChainReport {
+        let iterations = chains.iter().map(Chain::iterations).min().unwrap_or(0);
+        let burn_in = chains.iter().map(|c| c.burn_in).max().unwrap_or(0);
+        if iterations <= burn_in {
+            return ChainReport {
+                summary: Vec::new(),
+                acceptance: Vec::new(),
+                min_state_update_rate: None,
+                warnings: vec![ChainWarning::NoDraws {
+                    iterations,
+                    burn_in,
+                }],
+                iterations,
+            };
+        }
         let summary = summarise(chains);
         let acceptance: Vec<f64> = chains.iter().map(Chain::acceptance_rate).collect();
         let mut min_state_update_rate = None;
@@ -153,6 +185,52 @@ impl ChainReport {
             acceptance,
             min_state_update_rate,
             warnings,
+            iterations,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ChainReport, ChainWarning};
+    use crate::Chain;
+
+    /// A chain of one parameter with `made` iterations and the burn-in given.
+    fn chain(made: usize, burn_in: usize) -> Chain {
+        Chain {
+            names: vec!["phi".into()],
+            burn_in,
+            samples: (0..made).map(|k| (k as f64 * 0.7).sin()).collect(),
+            log_likelihood: vec![-1.0; made],
+            log_prior: vec![0.0; made],
+            accepted: (0..made).map(|k| k % 3 == 0).collect(),
+            state_update_rate: None,
+            state_mean: None,
+            interrupted: true,
+        }
+    }
+
+    #[test]
+    fn chains_stopped_inside_their_burn_in_have_no_summary_and_say_so() {
+        let report = ChainReport::of(&[chain(40, 100), chain(37, 100)]);
+        assert!(report.summary.is_empty() && report.acceptance.is_empty());
+        assert_eq!(report.iterations, 37);
+        assert_eq!(
+            report.warnings,
+            vec![ChainWarning::NoDraws {
+                iterations: 37,
+                burn_in: 100
+            }]
+        );
+        assert!(
+            report.warnings[0]
+                .to_string()
+                .contains("no draws to summarise")
+        );
+        // past the burn-in, the draws made are summarised and counted
+        let report = ChainReport::of(&[chain(150, 100), chain(160, 100)]);
+        assert_eq!(report.iterations, 150);
+        assert_eq!(report.summary.len(), 1);
+        assert!(report.summary[0].mean.is_finite() && report.summary[0].sd >= 0.0);
     }
 }

@@ -655,9 +655,11 @@ fn finish(
         acceptance,
         min_state_update_rate: min_update_rate,
         warnings,
+        iterations: made,
     } = ChainReport::of(chains);
     let warnings: Vec<String> = warnings.iter().map(ToString::to_string).collect();
-    let iterations = (a.iterations * chains.len()) as f64;
+    let interrupted = chains.iter().any(|c| c.interrupted);
+    let iterations = (made.max(1) * chains.len()) as f64;
     for w in &warnings {
         crate::warn(w);
     }
@@ -667,23 +669,34 @@ fn finish(
             "command": command, "system": a.label(), "chains": chains.len(),
             "iterations": a.iterations, "burn_in": chains[0].burn_in, "particles": particles,
             "seed": a.seed, "acceptance": acceptance, "summary": summary,
-            "interrupted": chains.iter().any(|c| c.interrupted),
+            "interrupted": interrupted, "iterations_made": made,
             "min_state_update_rate": min_update_rate, "warnings": warnings,
             "seconds": seconds, "ms_per_iteration": 1e3 * seconds * crate::threads().min(chains.len()) as f64 / iterations,
             "out": a.out,
         }),
         || {
+            let made = if interrupted {
+                format!("{made} of {} iterations (interrupted)", a.iterations)
+            } else {
+                format!("{made} iterations")
+            };
             let mut lines = vec![format!(
-                "{command}: {} chains x {} iterations ({} burn-in, {particles} particles) in {seconds:.2} s; acceptance {}",
+                "{command}: {} chains x {made} ({} burn-in, {particles} particles) in {seconds:.2} s; acceptance {}",
                 chains.len(),
-                a.iterations,
                 chains[0].burn_in,
-                acceptance
-                    .iter()
-                    .map(|v| format!("{v:.3}"))
-                    .collect::<Vec<_>>()
-                    .join(" ")
+                if acceptance.is_empty() {
+                    "-".to_string()
+                } else {
+                    acceptance
+                        .iter()
+                        .map(|v| format!("{v:.3}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                }
             )];
+            if summary.is_empty() {
+                return lines.join("\n");
+            }
             lines.push(format!(
                 "{:>6} {:>12} {:>12} {:>10} {:>8} {:>8} {:>7} {:>12} {:>12}",
                 "param", "mean", "sd", "mcse", "ess_bulk", "ess_tail", "rhat", "q05", "q95"

@@ -395,7 +395,10 @@ fn a_sampler_interrupted_in_its_burn_in_says_so_instead_of_a_table_of_nan() {
     );
     assert_eq!(out.status.code(), Some(130), "{stderr}");
     assert!(stderr.contains("no draws to summarise"), "{stderr}");
-    assert!(stdout.contains("of 1000000 iterations (interrupted)"), "{stdout}");
+    assert!(
+        stdout.contains("of 1000000 iterations (interrupted)"),
+        "{stdout}"
+    );
     assert!(!stdout.contains("NaN"), "{stdout}");
     assert!(chains.exists());
 }

@@ -362,7 +362,8 @@ fn forecast_tf_filter_and_smooth_equal_the_library() {
     let summary = json_of(&run);
     let poles: Vec<[f64; 2]> = lib.model.poles().iter().map(|z| [z.re, z.im]).collect();
     assert_eq!(summary["poles"], serde_json::json!(poles));
-    let tf = lib.model.transfer_function(0, 0);
+    let tf = lib.model.transfer_function(0, 0).unwrap();
+    assert!(lib.model.transfer_function(1, 0).is_err());
     let channel = &summary["channels"][0];
     assert_eq!(
         channel["gain"].as_f64().map(f64::to_bits),

@@ -1,6 +1,6 @@
 //! Frequency responses of the deterministic part of a model.
 
-use crate::LinearGaussianModel;
+use crate::{KalmanError, LinearGaussianModel, Result};
 use nalgebra::{Complex, DMatrix};
 
 impl LinearGaussianModel {
@@ -108,13 +108,20 @@ impl LinearGaussianModel {
     /// (an inverse discrete Fourier transform). Coefficients below `1e-10` of the
     /// largest are taken as zero before the roots are found.
     ///
-    /// # Panics
-    /// If `i >= p` or `j >= m`.
-    pub fn transfer_function(&self, i: usize, j: usize) -> TransferFunction {
-        assert!(
-            i < self.p() && j < self.m(),
-            "channel ({i}, {j}) out of range"
-        );
+    /// # Errors
+    /// [`KalmanError::BadOption`] (`channel`) unless `i < p` and `j < m`.
+    pub fn transfer_function(&self, i: usize, j: usize) -> Result<TransferFunction> {
+        if i >= self.p() || j >= self.m() {
+            return Err(KalmanError::BadOption {
+                name: "channel",
+                message: format!(
+                    "output {i}, input {j} (0-based) is not a channel of a model with {} \
+                     output(s) and {} input(s)",
+                    self.p(),
+                    self.m()
+                ),
+            });
+        }
         let n = self.n();
         let poles = self.poles();
         let denominator = polynomial(&poles);
@@ -174,11 +181,11 @@ impl LinearGaussianModel {
             .frequency_response(0.0)
             .map(|g| g[(i, j)].re)
             .filter(|g| g.is_finite());
-        TransferFunction {
+        Ok(TransferFunction {
             numerator,
             denominator,
             zeros,
             gain,
-        }
+        })
     }
 }

@@ -73,7 +73,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     );
     for i in 0..model.p() {
         for j in 0..model.m() {
-            let tf = model.transfer_function(i, j);
+            let tf = model
+                .transfer_function(i, j)
+                .expect("i < p and j < m by the loops");
             let (input, output) = (name(&meta.inputs, j, 'u'), name(&meta.outputs, i, 'y'));
             text += &format!(
                 "\n{input} -> {output}: static gain {}; zeros {}",

@@ -1,7 +1,7 @@
 //! The output of one Markov chain.
 
 /// The draws of one chain, burn-in included (summaries skip it).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Chain {
     /// The parameter names.
     pub names: Vec<String>,

@@ -251,7 +251,8 @@ impl<'a, F: ModelFamily, P: Prior, S: ParameterStep<F>> Gibbs<'a, F, P, S> {
     fn chains(&self, sweep: &Sweep<'_, F::Model>) -> Result<Vec<Chain>, PmcmcError> {
         check_options(self.options)?;
         check_start(self.family, self.start)?;
-        (0..self.run.chains)
+        self.run
+            .chain_ids()
             .into_par_iter()
             .map(|c| self.chain(c, sweep))
             .collect()

@@ -48,6 +48,10 @@ impl ChainObserver for () {}
 pub struct ChainRun<'a> {
     /// Number of chains.
     pub chains: usize,
+    /// The index of the first chain (default 0): this run's chains are
+    /// `first .. first + chains`, so that chains split over machines
+    /// (`starting_at(0)` with 2 chains, `starting_at(2)` with 2) are those of one run of 4.
+    pub first: usize,
     /// The seed of the chains' random streams.
     pub seed: u64,
     /// Told of every iteration and asked whether to stop ([`ChainObserver`]).
@@ -59,6 +63,7 @@ impl ChainRun<'static> {
     pub fn new(chains: usize, seed: u64) -> Self {
         ChainRun {
             chains,
+            first: 0,
             seed,
             observer: &(),
         }
@@ -70,9 +75,28 @@ impl<'a> ChainRun<'a> {
     pub fn observed_by<'b>(self, observer: &'b dyn ChainObserver) -> ChainRun<'b> {
         ChainRun {
             chains: self.chains,
+            first: self.first,
             seed: self.seed,
             observer,
         }
+    }
+
+    /// The same run's chains `first .. first + chains` (by default `0 .. chains`):
+    /// chain `c` draws from the stream `(seed, c)` wherever it runs.
+    ///
+    /// # Example
+    /// ```
+    /// use sysid_pmcmc::ChainRun;
+    /// let second_half = ChainRun::new(2, 1).starting_at(2);
+    /// assert_eq!(second_half.chain_ids().collect::<Vec<_>>(), [2, 3]);
+    /// ```
+    pub fn starting_at(self, first: usize) -> ChainRun<'a> {
+        ChainRun { first, ..self }
+    }
+
+    /// The indices of this run's chains.
+    pub fn chain_ids(&self) -> std::ops::Range<usize> {
+        self.first..self.first.saturating_add(self.chains)
     }
 }
 
@@ -80,6 +104,7 @@ impl std::fmt::Debug for ChainRun<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ChainRun")
             .field("chains", &self.chains)
+            .field("first", &self.first)
             .field("seed", &self.seed)
             .finish_non_exhaustive()
     }

@@ -139,8 +139,8 @@ pub(crate) fn check_lengths(iterations: usize, burn_in: usize) -> Result<(), Pmc
 }
 
 /// Runs `run.chains` independent PMMH chains from `start` (constrained parameters), in
-/// parallel on the current rayon pool. Chain `c` uses the random stream
-/// `(run.seed, c)`.
+/// parallel on the current rayon pool. Chain `c` (of [`ChainRun::chain_ids`]) uses the
+/// random stream `(run.seed, c)`.
 ///
 /// # Example
 /// ```no_run
@@ -175,7 +175,7 @@ pub fn pmmh<F: ModelFamily, P: Prior>(
         options,
         run,
     };
-    (0..run.chains)
+    run.chain_ids()
         .into_par_iter()
         .map(|c| sampler.chain(c))
         .collect()
@@ -293,7 +293,12 @@ impl<F: ModelFamily, P: Prior> Pmmh<'_, F, P> {
             {
                 candidate.log_likelihood = match filter.run(&model, data, filter_seed) {
                     Ok(run) => run.loglik,
-                    Err(SmcError::DegenerateWeights { .. }) => f64::NEG_INFINITY,
+                    // a proposal outside the model's domain (its states blow up to a
+                    // NaN density, e.g. a negative spring constant) has likelihood zero
+                    // and is rejected; at the start the same is an error
+                    Err(SmcError::DegenerateWeights { .. } | SmcError::InvalidDensity { .. }) => {
+                        f64::NEG_INFINITY
+                    }
                     Err(source) => {
                         return Err(PmcmcError::Smc {
                             chain,

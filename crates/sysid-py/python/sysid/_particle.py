@@ -1,0 +1,249 @@
+"""Your own nonlinear model as a model file (docs/model-format.md), compiled in Rust,
+and the particle methods on it: ``particle_filter``, ``fit`` and ``pmmh``."""
+
+import json
+import os
+
+import numpy as np
+
+from . import _sysid
+from ._data import signals
+from ._errors import OptionError
+from ._linear import _same, _write_new
+from ._trust import partial_as, report
+
+
+class ModelFile:
+    """A nonlinear state-space model file (``.toml``): its equations, parameters and
+    noise. ``ModelFile(path)`` reads one, ``ModelFile.from_string(text)`` takes the
+    text. A bad file raises ``ModelFileError`` with the line and column."""
+
+    def __init__(self, path):
+        path = os.fspath(path)
+        with open(path, encoding="utf-8") as f:
+            self._set(f.read(), path)
+
+    @classmethod
+    def from_string(cls, text, origin="<string>"):
+        model = cls.__new__(cls)
+        model._set(text, origin)
+        return model
+
+    def _set(self, text, origin):
+        self.text, self.origin = text, origin
+        self._compiled = _sysid.CompiledModel(text, origin)
+
+    def __getstate__(self):
+        return {"text": self.text, "origin": self.origin}
+
+    def __setstate__(self, state):
+        self._set(state["text"], state["origin"])
+
+    def __eq__(self, other):
+        return isinstance(other, ModelFile) and self.text == other.text
+
+    @property
+    def param_names(self):
+        """The free parameters (those not ``fixed = true``)."""
+        return self._compiled.free_names()
+
+    @property
+    def params(self):
+        """The free parameters' values in the file, by name."""
+        return dict(zip(self.param_names, self._compiled.free_values()))
+
+    @property
+    def states(self):
+        return self._compiled.names()[0]
+
+    @property
+    def inputs(self):
+        return self._compiled.names()[1]
+
+    @property
+    def outputs(self):
+        return self._compiled.names()[2]
+
+    def save(self, path, overwrite=False):
+        """Writes the file's text (refuses to replace a file unless ``overwrite``)."""
+        _write_new(path, self.text, overwrite)
+
+    def _signals(self, data, u, time):
+        return signals(data, u, time, model_names=(self.inputs, self.outputs))
+
+    def __repr__(self):
+        return f"ModelFile({self.origin!r}, params={self.params})"
+
+
+def _model(model):
+    return model if isinstance(model, ModelFile) else ModelFile(model)
+
+
+class FilterResults:
+    """``sysid pf``: the log-likelihood estimate, its Monte Carlo sd from repeats,
+    the filtered means and the ESS of every step, and the warnings."""
+
+    def __init__(self, raw, states):
+        self._raw = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in raw.items()}
+        self.states = list(states)
+        self.loglik = raw["loglik"]
+        self.loglik_sd = raw["loglik_sd"]
+        self.repeat_logliks = list(raw["repeat_logliks"])
+        self.resampled_steps = raw["resampled_steps"]
+        self.means = np.asarray(raw["means"], dtype=float)
+        self.ess = np.asarray(raw["ess"], dtype=float)
+        self.min_ess = raw["min_ess"]
+        self.min_ess_step = raw["min_ess_step"]
+        self.warnings = list(raw["warnings"])
+
+    def __reduce__(self):
+        return (FilterResults, (self._raw, self.states))
+
+    def __eq__(self, other):
+        return isinstance(other, FilterResults) and _same(self._raw, other._raw)
+
+
+def particle_filter(model, data, u=None, *, particles=1000, seed=1, resample="systematic",
+                    ess=1.0, repeats=9, time=None, progress=None, threads=None, strict=False):
+    """``sysid pf``: the bootstrap particle filter on a model file at its values."""
+    model = _model(model)
+    s = model._signals(data, u, time)
+    raw = _sysid.particle_filter(model._compiled, s.y, s.u, s.time, particles, seed, resample,
+                                 ess, repeats, progress, threads)
+    return report(FilterResults(raw, model.states), strict, "particle_filter")
+
+
+class ModelFitResults:
+    """``sysid fit --model``: the fitted model file, the estimates, the log-likelihood
+    estimate, the method that ran, whether Ctrl-C stopped it, and the warnings."""
+
+    def __init__(self, raw, origin="<fit>"):
+        self._raw = dict(raw)
+        self.model = ModelFile.from_string(raw["text"], origin)
+        self.method = raw["method"]
+        self.param_names = list(raw["names"])
+        self.llf = raw["loglik"]
+        self.interrupted = raw["interrupted"]
+        self.warnings = list(raw["warnings"])
+
+    @property
+    def loglik(self):
+        return self.llf
+
+    @property
+    def params(self):
+        return dict(zip(self.param_names, self._raw["estimate"]))
+
+    def __reduce__(self):
+        return (ModelFitResults, (self._raw, self.model.origin))
+
+    def __eq__(self, other):
+        return isinstance(other, ModelFitResults) and _same(self._raw, other._raw)
+
+
+def fit(model, data, u=None, *, method="robust", particles=100, smoother="tanizaki",
+        max_iter=500, starts=8, seed=1, time=None, progress=None, threads=None, strict=False):
+    """``sysid fit --model``: maximum likelihood for a model file's free parameters, by
+    the method the command line chooses: closed-form particle EM when the equations are
+    affine in them (``method`` ``robust``, ``em`` or ``psaem``), gradient EM otherwise."""
+    model = _model(model)
+    s = model._signals(data, u, time)
+    with partial_as(lambda raw: ModelFitResults(raw, model.origin)):
+        raw = _sysid.fit_model(model._compiled, s.y, s.u, method, particles, smoother,
+                               max_iter, starts, seed, progress, threads)
+    return report(ModelFitResults(raw, model.origin), strict, "fit")
+
+
+class Chains:
+    """MCMC chains (``sysid pmmh --out`` writes the same JSON): ``draws`` (chains x
+    kept iterations x parameters), ``summary()``, ``acceptance``, ``warnings``."""
+
+    def __init__(self, chains, ids):
+        self._chains = chains if isinstance(chains, list) else json.loads(chains)
+        self.ids = list(ids)
+        report_ = _sysid.chain_report(json.dumps(self._chains))
+        self._summary = json.loads(report_["summary"])
+        self.acceptance = list(report_["acceptance"])
+        self.warnings = list(report_["warnings"])
+        self.iterations = report_["iterations"]
+
+    @property
+    def param_names(self):
+        return list(self._chains[0]["names"])
+
+    @property
+    def interrupted(self):
+        return any(c["interrupted"] for c in self._chains)
+
+    @property
+    def draws(self):
+        """The draws after burn-in: an array (chains, iterations, parameters)."""
+        d = len(self.param_names)
+        kept = [np.asarray(c["samples"], dtype=float).reshape(-1, d)[c["burn_in"]:]
+                for c in self._chains]
+        n = min(len(k) for k in kept)
+        return np.stack([k[:n] for k in kept])
+
+    def to_json(self):
+        """The chains as ``sysid pmmh --out`` writes them."""
+        return json.dumps({"chains": self._chains})
+
+    def summary(self):
+        """Mean, sd, MCSE, ESS (bulk, tail), R-hat and quantiles of every parameter (a
+        DataFrame with pandas, else a list of dicts)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            return self._summary
+        return pd.DataFrame(self._summary).set_index("name")
+
+    @staticmethod
+    def concat(parts):
+        """Chains run apart (``pmmh(chains=[0, 1])``, ``pmmh(chains=[2, 3])``) as one
+        run's: equal to ``pmmh(chains=4)``."""
+        pairs = sorted((i, c) for p in parts for i, c in zip(p.ids, p._chains))
+        ids = [i for i, _ in pairs]
+        if len(set(ids)) != len(ids):
+            raise OptionError("Chains.concat: a chain appears twice", "parts")
+        return Chains([c for _, c in pairs], ids)
+
+    def __reduce__(self):
+        return (Chains, (self._chains, self.ids))
+
+    def __eq__(self, other):
+        return isinstance(other, Chains) and self.ids == other.ids and _same(
+            self._chains, other._chains)
+
+
+def _blocks(ids):
+    """Consecutive runs of chain ids: ``[0, 1, 3]`` -> ``[(0, 2), (3, 1)]``."""
+    blocks = []
+    for i in ids:
+        if blocks and blocks[-1][0] + blocks[-1][1] == i:
+            blocks[-1] = (blocks[-1][0], blocks[-1][1] + 1)
+        else:
+            blocks.append((i, 1))
+    return blocks
+
+
+def pmmh(model, data, u=None, *, chains=4, iterations=10000, burn_in=None, particles=100,
+         seed=1, proposal_sd=None, adapt=True, time=None, progress=None, threads=None,
+         strict=False):
+    """``sysid pmmh --model``: particle marginal Metropolis-Hastings over the model
+    file's free parameters (priors from the file). ``chains`` is a number or a list of
+    chain ids (chain ``c`` draws from the stream ``(seed, c)`` wherever it runs), so
+    that chains spread over workers concatenate (``Chains.concat``) to one run's."""
+    model = _model(model)
+    s = model._signals(data, u, time)
+    ids = list(range(chains)) if isinstance(chains, int) else sorted(int(c) for c in chains)
+    if not ids or len(set(ids)) != len(ids) or ids[0] < 0:
+        raise OptionError(f"chains: {chains!r} is not a number or a list of distinct ids",
+                          "chains")
+    drawn = []
+    for first, count in _blocks(ids):
+        with partial_as(lambda raw: Chains(json.loads(raw["chains"]) + [], ids[:0])):
+            raw = _sysid.pmmh_model(model._compiled, s.y, s.u, count, first, iterations,
+                                    burn_in, particles, seed, proposal_sd, adapt, progress,
+                                    threads)
+        drawn += json.loads(raw["chains"])
+    return report(Chains(drawn, ids), strict, "pmmh")

@@ -4,7 +4,7 @@
 use crate::data::{record, times};
 use crate::errors::Failure;
 use crate::run::{Progress, supervise};
-use numpy::{PyArray2, PyReadonlyArray2};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use sysid::em::FitRun;
@@ -162,6 +162,7 @@ fn particle_filter<'py>(
     let series = series_of(&data)?;
     let progress = Progress::of(progress, "particle_filter")?;
     let run = supervise(py, threads, &progress, repeats as u64 + 1, |control| {
+        let began = std::time::Instant::now();
         let options = FilterOptions {
             particles,
             resampling,
@@ -176,22 +177,35 @@ fn particle_filter<'py>(
             FilterDiagnostics::diagnose(&smc, &series, &pf, summary.loglik, seed, repeats, || {
                 control.tick()
             });
-        Ok::<_, Failure>((summary, checked, pf.means().to_vec(), pf.ess().to_vec()))
+        let seconds = began.elapsed().as_secs_f64();
+        Ok::<_, Failure>((
+            summary,
+            checked,
+            pf.means().to_vec(),
+            pf.ess().to_vec(),
+            seconds,
+        ))
     })?;
-    let (summary, checked, means, ess) = run.value?;
+    let (summary, checked, means, ess, seconds) = run.value?;
     if let Some(e) = run.stopped_by {
         return Err(e);
     }
     let n = smc.state_dim();
-    let rows: Vec<Vec<f64>> = means.chunks(n.max(1)).map(<[f64]>::to_vec).collect();
+    let steps = means.len() / n.max(1);
     let out = PyDict::new(py);
     out.set_item("loglik", summary.loglik)?;
     out.set_item("resampled_steps", summary.resampled_steps)?;
+    // the library's own time (for the overhead of the Python call; not part of the
+    // result's equality)
+    out.set_item("seconds", seconds)?;
+    // (the filtered means are time-major already: one copy into a (T, n) array)
     out.set_item(
         "means",
-        PyArray2::from_vec2(py, &rows).map_err(Failure::sysid)?,
+        PyArray1::from_vec(py, means)
+            .reshape([steps, n])
+            .map_err(Failure::sysid)?,
     )?;
-    out.set_item("ess", ess)?;
+    out.set_item("ess", PyArray1::from_vec(py, ess))?;
     out.set_item("loglik_sd", checked.loglik_sd)?;
     out.set_item("repeat_logliks", checked.repeat_logliks.clone())?;
     out.set_item("min_ess", checked.min_ess.map(|(e, _)| e))?;

@@ -16,7 +16,7 @@ mod em;
 mod kalman;
 mod lti2x2;
 mod modelfile_em;
-mod nlbench_em;
+pub mod nlbench_em;
 pub mod nlbench_study;
 mod pendulum_em;
 mod pmcmc;

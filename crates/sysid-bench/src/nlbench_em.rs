@@ -207,6 +207,84 @@ fn run_one<S: Smoother<Nlbench> + Clone + Send + Sync>(
     })
 }
 
+/// The study's settings, as every line of its output repeats them.
+fn params_json(a: &Args) -> serde_json::Value {
+    let (index, count) = a.shard;
+    json!({"T": a.steps, "M": a.particles, "iters": a.iters, "runs": a.runs,
+        "smoother": a.smoother, "seed": a.seed, "method": a.method, "at_truth": a.at_truth,
+        "shard": format!("{index}/{count}")})
+}
+
+/// A run's line of the output.
+fn line_json(params: &serde_json::Value, r: &RunResult) -> serde_json::Value {
+    let [sa, sb, sc, sd] = abcd(&r.start);
+    let [ea, eb, ec, ed] = abcd(&r.estimate);
+    json!({
+        "task": "nlbench_em_run", "params": params, "run": r.run,
+        "start": {"a": sa, "b": sb, "c": sc, "d": sd},
+        "estimate": {"a": ea, "b": eb, "c": ec, "d": ed, "q": r.estimate.q, "r": r.estimate.r},
+        "converged": converged(&r.estimate), "iterations": r.iterations,
+        "trajectory_inside_box": r.trace.iter().all(inside_box),
+        "likelihood_decreases": r.decreases, "final_loglik": r.final_loglik,
+        "reference_loglik": {"truth": r.reference_truth, "start": r.reference_start,
+            "final": r.reference_final,
+            "particles": REFERENCE_PARTICLES},
+        "seconds": r.seconds, "robust": r.robust,
+    })
+}
+
+/// The settings of a study from the runner's flags (`["--runs", "8", ...]`), at the
+/// command line's defaults for the flags not given.
+///
+/// # Errors
+/// A flag the runner does not know, or a value it cannot read.
+pub fn args_from(flags: &[String]) -> Result<Args, String> {
+    use clap::Parser;
+    #[derive(clap::Parser)]
+    struct Flags {
+        #[command(flatten)]
+        args: Args,
+    }
+    let all = std::iter::once("nlbench-em".to_string()).chain(flags.iter().cloned());
+    Flags::try_parse_from(all)
+        .map(|f| f.args)
+        .map_err(|e| e.to_string().lines().next().unwrap_or_default().to_string())
+}
+
+/// Run `run` of the study `a`: its output line, as `nlbench-em` prints it (whatever
+/// shard it belongs to: a run depends only on the study's seed and its index, so
+/// that runs spread over workers in any way give the study's lines).
+///
+/// # Errors
+/// Bad settings (`--method`, `--smoother`), a run index outside `0..runs`, or a run
+/// that fails.
+pub fn run_line(a: &Args, run: usize) -> Result<serde_json::Value, String> {
+    method(a)?;
+    if run >= a.runs {
+        return Err(format!("run {run}: the study has {} runs", a.runs));
+    }
+    Ok(line_json(&params_json(a), &result_of(a, run)?))
+}
+
+/// Run `run` with the study's smoother.
+fn result_of(a: &Args, run: usize) -> Result<RunResult, String> {
+    match a.smoother.as_str() {
+        "tanizaki" => run_one(a, run, Tanizaki::default()),
+        "ffbsi-reject" => run_one(
+            a,
+            run,
+            FfbsiReject {
+                paths: a.particles,
+                max_trials: None,
+                parallel: false,
+            },
+        ),
+        other => Err(format!(
+            "--smoother {other:?}: use tanizaki or ffbsi-reject"
+        )),
+    }
+}
+
 /// Whether (a, b, c, d) are all within 10 % of the truth.
 fn inside_box(v: &[f64; 4]) -> bool {
     v.iter()
@@ -257,42 +335,13 @@ pub fn run(a: &Args) -> Result<(), String> {
     };
     let results: Vec<Result<RunResult, String>> = runs
         .par_iter()
-        .map(|&run| match a.smoother.as_str() {
-            "tanizaki" => run_one(a, run, Tanizaki::default()),
-            "ffbsi-reject" => run_one(
-                a,
-                run,
-                FfbsiReject {
-                    paths: a.particles,
-                    max_trials: None,
-                    parallel: false,
-                },
-            ),
-            other => Err(format!(
-                "--smoother {other:?}: use tanizaki or ffbsi-reject"
-            )),
-        })
+        .map(|&run| result_of(a, run))
         .map(progress)
         .collect();
     let results: Vec<RunResult> = results.into_iter().collect::<Result<_, _>>()?;
-    let params = json!({"T": a.steps, "M": a.particles, "iters": a.iters, "runs": a.runs,
-        "smoother": a.smoother, "seed": a.seed, "method": a.method, "at_truth": a.at_truth,
-        "shard": format!("{index}/{count}")});
+    let params = params_json(a);
     for r in &results {
-        let [sa, sb, sc, sd] = abcd(&r.start);
-        let [ea, eb, ec, ed] = abcd(&r.estimate);
-        emit(&json!({
-            "task": "nlbench_em_run", "params": params, "run": r.run,
-            "start": {"a": sa, "b": sb, "c": sc, "d": sd},
-            "estimate": {"a": ea, "b": eb, "c": ec, "d": ed, "q": r.estimate.q, "r": r.estimate.r},
-            "converged": converged(&r.estimate), "iterations": r.iterations,
-            "trajectory_inside_box": r.trace.iter().all(inside_box),
-            "likelihood_decreases": r.decreases, "final_loglik": r.final_loglik,
-            "reference_loglik": {"truth": r.reference_truth, "start": r.reference_start,
-                "final": r.reference_final,
-                "particles": REFERENCE_PARTICLES},
-            "seconds": r.seconds, "robust": r.robust,
-        }));
+        emit(&line_json(&params, r));
     }
     if let Some(path) = &a.trace_out {
         let mut w = std::io::BufWriter::new(
@@ -364,25 +413,48 @@ fn summary_json(
 /// Merges the JSON-lines outputs of shards: re-emits the run lines in run order (each
 /// run once) and the summary of all of them.
 pub fn merge(files: &[std::path::PathBuf]) -> Result<(), String> {
-    let mut runs: std::collections::BTreeMap<u64, serde_json::Value> = Default::default();
+    let mut lines = Vec::new();
     for path in files {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
         for (k, line) in text.lines().enumerate() {
             let value: serde_json::Value = serde_json::from_str(line)
                 .map_err(|e| format!("{}, line {}: {e}", path.display(), k + 1))?;
-            if value["task"] == "nlbench_em_run" {
-                let run = value["run"]
-                    .as_u64()
-                    .ok_or_else(|| format!("{}, line {}: no run index", path.display(), k + 1))?;
-                runs.insert(run, value);
+            if value["task"] == "nlbench_em_run" && value["run"].as_u64().is_none() {
+                return Err(format!("{}, line {}: no run index", path.display(), k + 1));
             }
+            lines.push(value);
+        }
+    }
+    for line in merged(lines, &format!("merged from {} files", files.len()))? {
+        emit(&line);
+    }
+    Ok(())
+}
+
+/// The run lines among `lines` (the outputs of shards, or of runs made one by one by
+/// [`run_line`]), each run once and in run order, then the summary of all of them,
+/// its `shard` labelled `label`: the output of the unsharded study but for the timing
+/// fields and the labels.
+///
+/// # Errors
+/// No run line among `lines`.
+pub fn merged(
+    lines: Vec<serde_json::Value>,
+    label: &str,
+) -> Result<Vec<serde_json::Value>, String> {
+    let mut runs: std::collections::BTreeMap<u64, serde_json::Value> = Default::default();
+    for value in lines {
+        if value["task"] == "nlbench_em_run"
+            && let Some(run) = value["run"].as_u64()
+        {
+            runs.insert(run, value);
         }
     }
     let Some(first) = runs.values().next() else {
         return Err("no nlbench_em_run lines in the inputs".into());
     };
     let mut params = first["params"].clone();
-    params["shard"] = json!(format!("merged from {} files", files.len()));
+    params["shard"] = json!(label);
     let field = |v: &serde_json::Value, k: &str| v["estimate"][k].as_f64().unwrap_or(f64::NAN);
     let estimates: Vec<NlbenchParams> = runs
         .values()
@@ -404,11 +476,8 @@ pub fn merge(files: &[std::path::PathBuf]) -> Result<(), String> {
         .values()
         .map(|v| v["seconds"].as_f64().unwrap_or(f64::NAN))
         .collect();
-    for v in runs.values() {
-        emit(v);
-    }
-    emit(&summary_json(&params, &estimates, &references, &seconds));
-    Ok(())
+    let summary = summary_json(&params, &estimates, &references, &seconds);
+    Ok(runs.into_values().chain(std::iter::once(summary)).collect())
 }
 
 /// Seed 000's Figure 1 from a study's run lines (starts) and trajectories.

@@ -4,7 +4,7 @@
 //! command line does, and returns plain values (numbers, arrays, model-file text);
 //! the Python half (`python/sysid/`) wraps them in result objects. Every computation
 //! runs with the GIL released, on a worker thread that the calling thread watches for
-//! Ctrl-C and progress ([`run::supervise`]).
+//! Ctrl-C and progress (`run::supervise`).
 
 mod checks;
 mod data;
@@ -12,6 +12,7 @@ mod errors;
 mod linear;
 mod particle;
 mod run;
+mod studies;
 
 use pyo3::prelude::*;
 
@@ -21,5 +22,6 @@ fn _sysid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     linear::register(m)?;
     particle::register(m)?;
+    studies::register(m)?;
     Ok(())
 }

@@ -17,6 +17,10 @@ def binary():
     return os.environ.get("SYSID_BIN", str(REPO / "target" / "release" / "sysid"))
 
 
+def bench_binary():
+    return os.environ.get("SYSID_BENCH_BIN", str(REPO / "target" / "release" / "sysid-bench"))
+
+
 def cli(*args, check=True):
     """Runs the command line; its completed process."""
     run = subprocess.run([binary(), *map(str, args)], capture_output=True, text=True)

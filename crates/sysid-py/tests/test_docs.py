@@ -57,7 +57,8 @@ def test_the_slurm_recipe_s_commands_run_one_after_the_other(tmp_path):
 
 def test_the_readme_installs_the_package_as_the_guide_does():
     readme = (REPO / "README.md").read_text()
-    assert "pip install ./crates/sysid-py" in readme
+    assert 'pip install "./crates/sysid-py[pandas]"' in readme
+    assert 'pip install "./crates/sysid-py[pandas]"' in GUIDE.read_text()
     assert (REPO / "crates" / "sysid-py" / "pyproject.toml").exists()
 
 

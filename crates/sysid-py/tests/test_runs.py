@@ -124,6 +124,13 @@ def test_ctrl_c_stops_fit_lti_with_the_partial_result():
     assert partial is None or isinstance(partial, sysid.LinearFitResults)
 
 
+def test_progress_true_prints_a_counter_to_stderr(long_record, capsys):
+    sysid.fit(OSCILLATOR, long_record, method="em", particles=50, max_iter=20,
+              progress=True, strict=False)
+    err = capsys.readouterr().err
+    assert "fit: 20/20\n" in err
+
+
 def test_the_progress_callback_is_called_and_its_exception_stops_the_run(long_record):
     seen = []
     sysid.fit(OSCILLATOR, long_record, method="em", particles=50, max_iter=20,

@@ -392,6 +392,19 @@ fn today() -> String {
 /// Runs the report.
 pub fn run(a: &Args) -> Result<(), String> {
     let plan = plan(&a.scale)?;
+    // the folder of the report and its figure, before the runners take their minutes
+    let folder = a
+        .out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !folder.is_dir() {
+        return Err(format!(
+            "--out {}: the folder {} does not exist",
+            a.out.display(),
+            folder.display()
+        ));
+    }
     let started = Instant::now();
     let mut sections: Vec<Section> = Vec::new();
     for command in &plan {

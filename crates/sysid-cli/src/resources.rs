@@ -4,13 +4,48 @@
 
 use crate::error::CliError;
 
-/// The memory available to this process, in bytes: Linux's `MemAvailable`, or `None`
-/// where it cannot be read (the guard is then skipped).
+/// The memory available to this process, in bytes: the least of Linux's
+/// `MemAvailable`, the room left under the process's control group limit (cgroup v2
+/// `memory.max` less `memory.current`, or v1's `memory.limit_in_bytes` less its usage)
+/// and its address-space limit (`ulimit -v`); `None` where none can be read (the guard
+/// is then skipped).
 pub fn available_memory() -> Option<f64> {
+    [machine_available(), cgroup_room(), address_space_limit()]
+        .into_iter()
+        .flatten()
+        .reduce(f64::min)
+}
+
+fn machine_available() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib * 1024.0)
+}
+
+/// A number in a file (`max` and unreadable files: none).
+fn number_in(path: &str) -> Option<f64> {
+    std::fs::read_to_string(path).ok()?.trim().parse().ok()
+}
+
+/// The room under the control group's memory limit.
+fn cgroup_room() -> Option<f64> {
+    let v2 = number_in("/sys/fs/cgroup/memory.max")
+        .map(|limit| limit - number_in("/sys/fs/cgroup/memory.current").unwrap_or(0.0));
+    v2.or_else(|| {
+        let limit = number_in("/sys/fs/cgroup/memory/memory.limit_in_bytes")?;
+        // v1 reports "no limit" as a huge number
+        (limit < 1e18).then(|| {
+            limit - number_in("/sys/fs/cgroup/memory/memory.usage_in_bytes").unwrap_or(0.0)
+        })
+    })
+}
+
+/// `ulimit -v`, the soft limit of the address space (`/proc/self/limits`).
+fn address_space_limit() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let line = text.lines().find(|l| l.starts_with("Max address space"))?;
+    line.split_whitespace().nth(3)?.parse().ok()
 }
 
 /// Bytes in a human unit (`1.2 GB`, `80 TB`).

@@ -25,7 +25,41 @@ fn sizes_beyond_the_machines_memory_are_refused_before_allocating() {
         ]),
         &["--repeats", "at most 1000"],
     );
-    let cases: [(&[&str], &str); 4] = [
+    let oscillator = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../examples/models/oscillator.toml"
+    );
+    let nile_model = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/nile_start.json");
+    let nile = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/nile.csv");
+    let cases: [(&[&str], &str); 6] = [
+        // (a model file's simulation allocated its times first, and aborted)
+        (
+            &[
+                "simulate",
+                "--model",
+                oscillator,
+                "--steps",
+                "100000000000",
+                "--out",
+                "m.csv",
+            ],
+            "--steps",
+        ),
+        // (a forecast allocated for a minute, then aborted)
+        (
+            &[
+                "forecast",
+                "--model",
+                nile_model,
+                "--data",
+                nile,
+                "--steps",
+                "1000000000",
+                "--out",
+                "f.csv",
+            ],
+            "--steps",
+        ),
         (
             &[
                 "pf",
@@ -90,6 +124,29 @@ fn sizes_beyond_the_machines_memory_are_refused_before_allocating() {
         assert_one_line_error(&sysid(&refs), &[option, "of memory", "available"]);
     }
     assert_eq!(entries(&dir), before, "no file left behind");
+}
+
+/// The guard counts the address-space limit (`ulimit -v`), not only the machine's
+/// memory: 100 million steps of the oscillator (5.6 GB) under a 4 GB limit.
+#[test]
+fn the_memory_guard_honours_ulimit() {
+    let dir = scratch_dir();
+    let oscillator = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../examples/models/oscillator.toml"
+    );
+    let out = dir.join("m.csv");
+    let run = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 4000000 && exec {} simulate --model {oscillator} --steps 100000000 --out {}",
+            env!("CARGO_BIN_EXE_sysid"),
+            out.display()
+        ))
+        .output()
+        .unwrap();
+    assert_one_line_error(&run, &["--steps", "of memory", "4.1 GB available"]);
+    assert!(!out.exists());
 }
 
 #[test]

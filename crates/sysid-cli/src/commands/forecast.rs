@@ -48,6 +48,13 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     ForecastIntervals::half_width(o.level).map_err(&level_error)?;
     crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
     let (model, file) = o.source.load()?;
+    // the forecast's means, sds, covariances and intervals, and the future times
+    let p = model.p() as f64;
+    crate::resources::check_memory(
+        "--steps",
+        &format!("{} steps ahead", o.steps),
+        8.0 * o.steps as f64 * (p * p + 6.0 * p + 1.0 + model.m() as f64),
+    )?;
     let future = match (&o.future_inputs, model.m()) {
         (_, 0) => nalgebra::DMatrix::zeros(0, o.steps),
         (None, m) => {

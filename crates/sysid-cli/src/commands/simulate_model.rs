@@ -253,11 +253,20 @@ fn run_model_file(o: &Options, path: &std::path::Path) -> Result<(), CliError> {
                 ),
             });
         }
-        None => (
-            o.steps,
-            Vec::new(),
-            (1..=o.steps).map(|t| t as f64).collect(),
-        ),
+        None => {
+            // the times, the states and outputs, before any of them is allocated
+            let (n, p) = (spec.states.len(), spec.outputs.len());
+            crate::resources::check_memory(
+                "--steps",
+                &format!("{} steps", o.steps),
+                8.0 * o.steps as f64 * ((n + p) as f64 * 2.0 + 1.0),
+            )?;
+            (
+                o.steps,
+                Vec::new(),
+                (1..=o.steps).map(|t| t as f64).collect(),
+            )
+        }
     };
     if steps == 0 {
         return Err(CliError::BadOption {

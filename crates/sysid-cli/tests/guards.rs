@@ -651,3 +651,36 @@ fn outputs_get_the_umask_s_mode_and_force_keeps_the_replaced_mode() {
     ]));
     assert_eq!(mode(&data), 0o640);
 }
+
+/// A transition that is one long sum (70 000 terms) overflowed the stack (exit 134):
+/// the nesting check counted parentheses, not the chain of `+`. It is one line naming
+/// the place now.
+#[test]
+fn a_model_file_with_an_endless_sum_is_refused_with_its_place() {
+    let dir = scratch_dir();
+    let model = dir.join("long.toml");
+    let sum = vec!["a*x"; 70_000].join(" + ");
+    std::fs::write(
+        &model,
+        format!(
+            "format = 1\nstates = [\"x\"]\noutputs = [\"y\"]\n[parameters]\na = 0.5\n\
+             [transition]\nx = \"{sum}\"\n[observation]\ny = \"x\"\n[noise]\nx = 0.1\ny = 0.1\n\
+             [initial]\nx = {{ mean = 0, variance = 1 }}\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.join("s.csv");
+    assert_one_line_error(
+        &sysid(&[
+            "simulate",
+            "--model",
+            s(&model),
+            "--steps",
+            "10",
+            "--out",
+            s(&out),
+        ]),
+        &["long.toml:7:", "more than 1000 operations"],
+    );
+    assert!(!out.exists());
+}

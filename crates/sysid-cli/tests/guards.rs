@@ -684,3 +684,55 @@ fn a_model_file_with_an_endless_sum_is_refused_with_its_place() {
     );
     assert!(!out.exists());
 }
+
+/// Work that would run for hours without a word is refused at once with what to do
+/// instead: a million PMMH chains, an O(M K T) FFBSi of 10^13 densities, a demo of
+/// 10^9 runs.
+#[test]
+fn work_that_would_run_for_hours_is_refused_at_once() {
+    let dir = scratch_dir();
+    let nl = simulate(&dir, "nlbench", 1000, 1);
+    let lg = simulate(&dir, "lgss", 100, 1);
+    let before = entries(&dir);
+    let started = std::time::Instant::now();
+    assert_one_line_error(
+        &sysid(&[
+            "pmmh",
+            "--system",
+            "lgss",
+            "--data",
+            s(&lg),
+            "--chains",
+            "1000000",
+            "--iters",
+            "100",
+        ]),
+        &["--chains", "at most 1024"],
+    );
+    let out = dir.join("p.csv");
+    assert_one_line_error(
+        &sysid(&[
+            "psmooth",
+            "--system",
+            "nlbench",
+            "--data",
+            s(&nl),
+            "--method",
+            "ffbsi",
+            "--particles",
+            "100000",
+            "--paths",
+            "100000",
+            "--out",
+            s(&out),
+        ]),
+        &["--paths", "1.0e13 transition densities", "ffbsi-reject"],
+    );
+    let figures = dir.join("demo");
+    assert_one_line_error(
+        &sysid(&["demo", "--runs", "1000000000", "--out-dir", s(&figures)]),
+        &["--runs", "at most 1000 runs", "--shard"],
+    );
+    assert!(started.elapsed().as_secs_f64() < 30.0);
+    assert_eq!(entries(&dir), before, "no file left behind");
+}

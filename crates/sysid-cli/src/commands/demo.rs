@@ -29,6 +29,12 @@ use sysid_bench::nlbench_study::{Method, NlbenchRun, NlbenchStudy, abcd, within_
 use sysid_plot::trajectories::{Run, parameter_trajectories};
 use sysid_plot::{Band, Figure, Panel, Series as Curve, Stroke};
 
+/// The most particle-EM runs the demo takes (the paper's study has 200).
+const MAX_RUNS: usize = 1000;
+
+/// The most EM iterations per run the demo takes (the paper's 1000).
+const MAX_ITERATIONS: usize = 100_000;
+
 /// Options of `sysid demo`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
@@ -478,6 +484,18 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         return Err(CliError::BadOption {
             option: "--runs/--iters",
             message: "must be at least 1".into(),
+        });
+    }
+    // (a demo of 10^9 runs ran for days without a word)
+    if runs > MAX_RUNS || iterations > MAX_ITERATIONS {
+        return Err(CliError::BadOption {
+            option: if runs > MAX_RUNS { "--runs" } else { "--iters" },
+            message: format!(
+                "{runs} runs x {iterations} iterations: the demo takes at most {MAX_RUNS} runs \
+                 and {MAX_ITERATIONS} iterations (the paper's study is 200 x 1000, --full); \
+                 a larger study is `sysid-bench nlbench-em --runs N --shard i/n` on several \
+                 machines"
+            ),
         });
     }
     note(&format!(

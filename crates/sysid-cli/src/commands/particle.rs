@@ -377,6 +377,37 @@ pub fn run_smoother(a: &SmoothArgs) -> Result<(), CliError> {
     }
 }
 
+/// The most transition densities a smoother may evaluate (about 20 minutes at 1 ns
+/// each; `psmooth --method ffbsi --particles 100000 --paths 100000` asked for 10^13 on
+/// 1000 steps and ran for hours without a word).
+const MAX_SMOOTHING_WORK: f64 = 1e12;
+
+/// Refuses an O(M K T) or O(M^2 T) smoother too large to finish, before the filter.
+fn check_smoothing_work(
+    method: &str,
+    particles: usize,
+    paths: usize,
+    steps: usize,
+) -> Result<(), CliError> {
+    let (m, k, t) = (particles as f64, paths as f64, steps as f64);
+    let (work, option) = match method {
+        "ffbsi" => (m * k * t, "--paths"),
+        "tanizaki" => (m * m * t, "--particles"),
+        _ => return Ok(()),
+    };
+    if work > MAX_SMOOTHING_WORK {
+        return Err(CliError::BadOption {
+            option,
+            message: format!(
+                "--method {method} with {particles} particles and {paths} paths over {steps} \
+                 steps evaluates about {work:.1e} transition densities (hours); use \
+                 --method ffbsi-reject (O(M) per path on average), or fewer particles or paths"
+            ),
+        });
+    }
+    Ok(())
+}
+
 fn smooth_with<M: FilterModel + TransitionBound + Sync>(
     a: &SmoothArgs,
     model: &M,
@@ -407,6 +438,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         ),
         8.0 * (history + trajectories),
     )?;
+    check_smoothing_work(&a.method, c.particles, path_count, file.record.len())?;
     let context = c.data.data.display().to_string();
     let series = series_of(&file, &context)?;
     let mut pf = ParticleFilter::new(options).map_err(option_error)?;

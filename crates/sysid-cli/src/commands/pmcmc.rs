@@ -272,11 +272,25 @@ fn file_priors(
     priors_over(a, &file.free_names(), file.priors())
 }
 
+/// The most chains a run takes.
+const MAX_CHAINS: usize = 1024;
+
 fn check_common(a: &ChainArgs) -> Result<usize, CliError> {
     // refuse before a long run, not after it
     crate::files::check_outputs(a.out.as_deref(), a.force)?;
     if a.chains == 0 {
         return Err(bad("--chains", "must be at least 1"));
+    }
+    // (a million chains ran for hours without a word)
+    if a.chains > MAX_CHAINS {
+        return Err(bad(
+            "--chains",
+            format!(
+                "{} chains: at most {MAX_CHAINS} (R-hat and the ESS need 4; more draws come \
+                 from --iters, or from runs with other seeds)",
+                a.chains
+            ),
+        ));
     }
     // every chain keeps its draws (at least one parameter and the log-posterior)
     crate::resources::check_memory(

@@ -101,6 +101,8 @@ def test_ctrl_c_stops_chains_within_a_second_with_the_partial_result(long_record
     partial = caught.value.partial
     assert isinstance(partial, sysid.Chains)
     assert partial.interrupted
+    assert partial.ids == [0, 1]
+    assert 0 < partial.iterations < 1_000_000
 
 
 def test_ctrl_c_stops_a_loop_of_filters_within_a_second(long_record):

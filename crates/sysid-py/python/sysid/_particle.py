@@ -240,11 +240,17 @@ def pmmh(model, data, u=None, *, chains=4, iterations=10000, burn_in=None, parti
     if not ids or len(set(ids)) != len(ids) or ids[0] < 0:
         raise OptionError(f"chains: {chains!r} is not a number or a list of distinct ids",
                           "chains")
-    drawn = []
+    drawn, done = [], []
+
+    def so_far(raw, first, count):
+        """The chains of the blocks before and of the one stopped (Ctrl-C)."""
+        return Chains(drawn + json.loads(raw["chains"]), done + list(range(first, first + count)))
+
     for first, count in _blocks(ids):
-        with partial_as(lambda raw: Chains(json.loads(raw["chains"]) + [], ids[:0])):
+        with partial_as(lambda raw, first=first, count=count: so_far(raw, first, count)):
             raw = _sysid.pmmh_model(model._compiled, s.y, s.u, count, first, iterations,
                                     burn_in, particles, seed, proposal_sd, adapt, progress,
                                     threads)
         drawn += json.loads(raw["chains"])
+        done += list(range(first, first + count))
     return report(Chains(drawn, ids), strict, "pmmh")

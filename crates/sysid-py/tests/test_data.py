@@ -125,6 +125,8 @@ def test_every_result_pickles_to_an_equal_object(oscillator_record, fitted_oscil
             sysid.pmmh(fitted_oscillator, frame, chains=2, iterations=50, particles=100),
         ]
     for result in results:
+        # every result says what it is when printed (a notebook's first look)
+        assert type(result).__name__ in repr(result), repr(result)
         copy = pickle.loads(pickle.dumps(result))
         assert type(copy) is type(result)
         assert copy == result, type(result).__name__

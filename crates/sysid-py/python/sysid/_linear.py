@@ -199,6 +199,10 @@ class N4sidResults:
         self.stabilised = raw["stabilised"]
         self.warnings = list(raw["warnings"])
 
+    def __repr__(self):
+        return (f"<N4sidResults order={self.order} spectral_radius={self.spectral_radius:.4g} "
+                f"warnings={len(self.warnings)}>")
+
     def __eq__(self, other):
         return isinstance(other, N4sidResults) and self.__dict__.keys() == other.__dict__.keys() and all(
             np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b

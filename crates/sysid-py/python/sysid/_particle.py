@@ -99,6 +99,11 @@ class FilterResults:
     def __reduce__(self):
         return (FilterResults, (self._raw, self.states))
 
+    def __repr__(self):
+        sd = "" if self.loglik_sd is None else f" (sd {self.loglik_sd:.3g})"
+        return (f"<FilterResults loglik={self.loglik:.6g}{sd} steps={len(self.ess)} "
+                f"warnings={len(self.warnings)}>")
+
     def __eq__(self, other):
         strip = lambda raw: {k: v for k, v in raw.items() if k != "seconds"}  # noqa: E731
         return isinstance(other, FilterResults) and _same(strip(self._raw), strip(other._raw))
@@ -137,6 +142,10 @@ class ModelFitResults:
 
     def __reduce__(self):
         return (ModelFitResults, (self._raw, self.model.origin))
+
+    def __repr__(self):
+        return (f"<ModelFitResults method={self.method} params={self.params} llf={self.llf} "
+                f"interrupted={self.interrupted} warnings={len(self.warnings)}>")
 
     def __eq__(self, other):
         return isinstance(other, ModelFitResults) and _same(self._raw, other._raw)
@@ -210,6 +219,10 @@ class Chains:
 
     def __reduce__(self):
         return (Chains, (self._chains, self.ids))
+
+    def __repr__(self):
+        return (f"<Chains ids={self.ids} params={self.param_names} "
+                f"iterations={self.iterations} warnings={len(self.warnings)}>")
 
     def __eq__(self, other):
         return isinstance(other, Chains) and self.ids == other.ids and _same(

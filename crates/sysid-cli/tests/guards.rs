@@ -736,3 +736,39 @@ fn work_that_would_run_for_hours_is_refused_at_once() {
     assert!(started.elapsed().as_secs_f64() < 30.0);
     assert_eq!(entries(&dir), before, "no file left behind");
 }
+
+/// A model fitted with `--detrend linear` on a record timed in seconds (step 2), run
+/// on a record numbered by rows (step 1), removed its trend at the wrong times and
+/// scored -2 088 199 775 % with exit 0. The time bases are compared now; the same
+/// record with its time column passes.
+#[test]
+fn a_linear_trend_on_another_time_base_is_refused() {
+    let dir = scratch_dir();
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/heating_system.csv");
+    let model = dir.join("fit.json");
+    assert_ok(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        data,
+        "--order",
+        "2",
+        "--detrend",
+        "linear",
+        "--out",
+        s(&model),
+    ]));
+    // the same signals without their time column: the rows number the steps
+    let text = std::fs::read_to_string(data).unwrap();
+    let rows: Vec<String> = text
+        .lines()
+        .map(|l| l.split_once(',').unwrap().1.to_string())
+        .collect();
+    let untimed = dir.join("untimed.csv");
+    std::fs::write(&untimed, rows.join("\n") + "\n").unwrap();
+    assert_one_line_error(
+        &sysid(&["compare", "--model", s(&model), "--data", s(&untimed)]),
+        &["--data", "untimed.csv", "time step is 1", "was 2"],
+    );
+    assert_ok(&sysid(&["compare", "--model", s(&model), "--data", data]));
+}

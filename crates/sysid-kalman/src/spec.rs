@@ -85,6 +85,11 @@ pub struct Detrend {
     /// `linear`: the outputs' slopes per unit of time.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub output_slopes: Vec<f64>,
+    /// `linear`: the fitted record's time step (the mean spacing of its times), by
+    /// which a record on another time base is recognised (its trend would be removed at
+    /// the wrong times). Absent in files written before it was kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_step: Option<f64>,
 }
 
 /// A model file's description of its data and of its fit (every entry optional;

@@ -64,6 +64,18 @@ pub enum TrendError {
     /// A stored trend that does not fit the model or is not a trend.
     #[error("{0}")]
     Stored(String),
+    /// A record whose times are on another base than the fitted record's.
+    #[error(
+        "the record's time step is {record}, the fitted record's was {model}: its linear \
+         trend would be removed at the wrong times; give the record's times in the units of \
+         the fitted record's (its time column t)"
+    )]
+    TimeBase {
+        /// The fitted record's time step.
+        model: f64,
+        /// This record's.
+        record: f64,
+    },
     /// The folded model failed the model checks.
     #[error("folding the means into the model: {0}")]
     Model(#[from] KalmanError),
@@ -85,6 +97,17 @@ pub struct Trend {
     pub output_offsets: DVector<f64>,
     /// The outputs' slopes per unit of time.
     pub output_slopes: DVector<f64>,
+    /// The fitted record's time step (mean spacing of its times; `None` for one time
+    /// or a trend stored without it).
+    pub time_step: Option<f64>,
+}
+
+/// The mean spacing of increasing times (`None` for fewer than two).
+fn mean_step(time: &[f64]) -> Option<f64> {
+    match time {
+        [first, .., last] => Some((last - first) / (time.len() - 1) as f64),
+        _ => None,
+    }
 }
 
 /// Least-squares line `(offset at origin, slope)` through a signal's observed values;
@@ -156,6 +179,7 @@ impl Trend {
             input_slopes,
             output_offsets,
             output_slopes,
+            time_step: mean_step(time),
         })
     }
 
@@ -211,7 +235,27 @@ impl Trend {
             input_slopes: DVector::from_column_slice(&d.input_slopes),
             output_offsets: DVector::from_column_slice(&d.outputs),
             output_slopes: DVector::from_column_slice(&d.output_slopes),
+            time_step: d.time_step.filter(|s| s.is_finite() && *s != 0.0),
         }))
+    }
+
+    /// Checks that a record's times are on the fitted record's base: a linear trend
+    /// evaluated at times in other units (row numbers for seconds) scored a model at
+    /// -2 088 199 775 %. Mean detrending, a trend stored without its time step and a
+    /// record of one step pass.
+    ///
+    /// # Errors
+    /// [`TrendError::TimeBase`] when the mean time steps differ by more than 1 %.
+    pub fn check_time_base(&self, time: &[f64]) -> Result<(), TrendError> {
+        let (Some(model), Some(record), TrendKind::Linear) =
+            (self.time_step, mean_step(time), self.kind)
+        else {
+            return Ok(());
+        };
+        if (record / model - 1.0).abs() > 0.01 || !record.is_finite() {
+            return Err(TrendError::TimeBase { model, record });
+        }
+        Ok(())
     }
 
     /// The model file's record of the detrending.
@@ -226,6 +270,7 @@ impl Trend {
             origin: linear.then_some(self.origin),
             input_slopes: slopes(&self.input_slopes),
             output_slopes: slopes(&self.output_slopes),
+            time_step: if linear { self.time_step } else { None },
         }
     }
 
@@ -352,6 +397,7 @@ mod tests {
             input_slopes: DVector::zeros(1),
             output_offsets: DVector::from_element(1, 7.0),
             output_slopes: DVector::zeros(1),
+            time_step: None,
         };
         let folded = trend.fold(&model).unwrap();
         let x_ss = 4.0 / (1.0 - 0.5);

@@ -70,6 +70,9 @@ pub(crate) fn prepare(
     )
     .map_err(|e| Failure::sysid(format!("model metadata: {e}")))?;
     if let Some(trend) = &trend {
+        trend
+            .check_time_base(&time)
+            .map_err(|e| Failure::data(e.to_string()))?;
         trend.remove_from(&mut record, &time);
     }
     let initial = match initial_state(initial)? {

@@ -59,6 +59,12 @@ impl DataArgs {
                     stored.model.p()
                 },
             )?;
+            trend
+                .check_time_base(&file.time)
+                .map_err(|e| CliError::BadOption {
+                    option: "--data",
+                    message: format!("{}: {e}", self.data.display()),
+                })?;
             detrend::remove(trend, &mut file);
         }
         Ok(file)

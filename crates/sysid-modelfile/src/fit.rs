@@ -88,6 +88,20 @@ pub enum FileFitWarning {
         /// Its mean over the last quarter.
         to: f64,
     },
+    /// Parameters (and initial states) whose values the data cannot tell apart: along
+    /// a direction of them the simulated outputs barely change.
+    Inseparable {
+        /// The names involved, largest share first.
+        names: Vec<String>,
+        /// The smallest over the largest singular value of the column-scaled
+        /// simulation Jacobian.
+        ratio: f64,
+    },
+    /// The simulation-error fit's best run stopped before its convergence test held.
+    NotConverged {
+        /// MINPACK's reason.
+        reason: String,
+    },
 }
 
 impl std::fmt::Display for FileFitWarning {
@@ -103,6 +117,19 @@ impl std::fmt::Display for FileFitWarning {
                 f,
                 "{name} is still moving ({from} -> {to} between the last two quarters of the \
                  iterations): run more iterations (--max-iter)"
+            ),
+            FileFitWarning::Inseparable { names, ratio } => write!(
+                f,
+                "{} cannot be separated by these data: along one direction of them the \
+                 simulated output changes {ratio:.1e} times as much as along the most visible \
+                 one, so only a combination of them is estimated; fix one of them (fixed = true) or \
+                 add a measurement that sees it",
+                names.join(", ")
+            ),
+            FileFitWarning::NotConverged { reason } => write!(
+                f,
+                "the simulation-error fit stopped before converging ({reason}): allow more \
+                 evaluations (--patience) or start nearer"
             ),
         }
     }
@@ -206,10 +233,17 @@ impl ModelFile {
                 origin: self.origin().to_string(),
             });
         }
-        match self.affine() {
+        let mut fit = match self.affine() {
             Some(affine) => self.fit_affine(&affine, data, options, run, observer),
             None => self.fit_gradient(data, options, run, observer),
+        }?;
+        if let Some(found) = fit.fitted.inseparable_on(data) {
+            fit.warnings.push(FileFitWarning::Inseparable {
+                names: found.names,
+                ratio: found.ratio,
+            });
         }
+        Ok(fit)
     }
 
     fn fit_affine(

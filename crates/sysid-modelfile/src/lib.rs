@@ -69,8 +69,10 @@ pub mod expr;
 mod fit;
 pub mod gaussian;
 pub mod gradient;
+pub mod output_error;
 pub mod program;
 mod shared;
+pub mod simulation;
 mod smc;
 pub mod spec;
 mod write;
@@ -80,6 +82,11 @@ pub use conjugate::AffineConjugate;
 pub use fit::{FileFit, FileFitError, FileFitReport, FileFitWarning};
 pub use gaussian::{Gaussian, GaussianModel, GaussianSmc};
 pub use gradient::ExprGradient;
+pub use output_error::{
+    InitialState, Inseparable, SimulationComparison, SimulationFit, SimulationFitOptions,
+    SimulationStart,
+};
+pub use simulation::{NoiseFree, SimulationError, Simulator};
 pub use smc::ExprSmc;
 pub use spec::{FORMAT, ModelFileError, ModelSpec, Parameter};
 
@@ -106,6 +113,14 @@ impl ModelFile {
             compiled: Arc::new(Compiled::new(spec)),
             origin: origin.to_string(),
         })
+    }
+
+    /// A model from a checked spec (a spec this crate changed, never a user's).
+    pub(crate) fn from_spec(spec: ModelSpec, origin: &str) -> ModelFile {
+        ModelFile {
+            compiled: Arc::new(Compiled::new(spec)),
+            origin: origin.to_string(),
+        }
     }
 
     /// Reads and checks the model file at `path`.

@@ -83,6 +83,17 @@ impl<'a> Series<'a> {
         self.steps
     }
 
+    /// The first `steps` steps (all of them when there are fewer; at least one).
+    pub fn head(&self, steps: usize) -> Series<'a> {
+        let steps = steps.clamp(1, self.steps);
+        Series {
+            outputs: &self.outputs[..steps * self.output_dim],
+            inputs: &self.inputs[..steps * self.input_dim],
+            steps,
+            ..*self
+        }
+    }
+
     /// Output dimension.
     pub fn output_dim(&self) -> usize {
         self.output_dim

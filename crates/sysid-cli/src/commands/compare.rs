@@ -6,12 +6,14 @@ use crate::DataArgs;
 use crate::error::CliError;
 use std::path::{Path, PathBuf};
 use sysid::kalman::{Comparison, Horizon};
+use sysid::modelfile::{InitialState, SimulationComparison};
 use sysid_plot::{Figure, Panel, Series};
 
 /// Options of `sysid compare`.
 #[derive(clap::Args, Debug)]
 pub struct Options {
-    /// Model files (JSON), one or more.
+    /// Model files, one or more: linear (JSON) or nonlinear (`.toml`, simulated
+    /// noise-free; --horizon inf only).
     #[arg(long, num_args = 1.., required = true)]
     pub model: Vec<PathBuf>,
     #[command(flatten)]
@@ -29,6 +31,11 @@ pub struct Options {
     /// or `diffuse` (see `sysid loglik --help`).
     #[arg(long, default_value = "model")]
     pub initial: String,
+    /// Nonlinear model files: the initial state minimises the simulation error over the
+    /// first N samples (Levenberg-Marquardt from the file's initial means; default: the
+    /// whole record, as for linear models). Benchmark protocols fix N, e.g. 5.
+    #[arg(long)]
+    pub initial_samples: Option<usize>,
     /// Also draw the measured and the models' outputs, one panel per output, as
     /// compare.svg and compare.png in this directory (created if missing).
     #[arg(long)]
@@ -58,10 +65,24 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         )?;
     }
     let mut rows = Vec::new();
+    let mut rms = Vec::new();
     let mut file_names = None;
     let mut curves = Vec::new();
     let mut data = None;
     for path in &o.model {
+        if crate::commands::nonlinear::is_model_file(path) {
+            let (comparison, file, simulated) = simulate_model_file(o, path, horizon)?;
+            rows.push(serde_json::json!({
+                "model": path, "fit_percent": comparison.fit_percent,
+                "fit_percent_mean": comparison.mean_fit_percent(),
+                "rms": simulated.rms, "initial_state": simulated.initial_state,
+            }));
+            rms.push((path.display().to_string(), simulated.rms));
+            curves.push((path.display().to_string(), comparison));
+            file_names.get_or_insert(file.output_names.clone());
+            data.get_or_insert(file);
+            continue;
+        }
         let (model, file) = model_and_data(path, &o.data, &o.initial)?;
         // in the file's units (a model fitted with --detrend linear)
         let trend = file.trend.as_ref().map(|t| t.outputs_at(&file.time));
@@ -113,10 +134,63 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                     .collect();
                 text += &format!("\n  {path}: {}", per.join(", "));
             }
+            for (path, rms) in &rms {
+                let per: Vec<String> = names
+                    .iter()
+                    .zip(rms)
+                    .map(|(n, r)| format!("{n} {}", crate::files::fmt(*r)))
+                    .collect();
+                text += &format!("\n  {path}: simulation RMS {}", per.join(", "));
+            }
             text
         },
     );
     Ok(())
+}
+
+/// A nonlinear model file's noise-free simulation of the record, as a comparison (and
+/// the library's result, for its RMS and initial state).
+fn simulate_model_file(
+    o: &Options,
+    path: &Path,
+    horizon: Horizon,
+) -> Result<(Comparison, crate::files::DataFile, SimulationComparison), CliError> {
+    if horizon != Horizon::Simulation {
+        return Err(CliError::BadOption {
+            option: "--horizon",
+            message: format!(
+                "{}: a nonlinear model file is compared by its noise-free simulation \
+                 (--horizon inf); k-step predictions of model files are not available yet",
+                path.display()
+            ),
+        });
+    }
+    let model = crate::commands::nonlinear::read(path)?;
+    let file = o
+        .data
+        .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
+    let series = crate::commands::particle::series_of(&file, &o.data.data.display().to_string())?;
+    let samples = o.initial_samples.unwrap_or(series.steps());
+    if samples == 0 {
+        return Err(CliError::BadOption {
+            option: "--initial-samples",
+            message: "at least 1 sample is needed".into(),
+        });
+    }
+    let result = model
+        .compare_simulation(series, InitialState::Estimate { samples }, o.burn_in)
+        .map_err(|e| CliError::BadOption {
+            option: "--model",
+            message: format!("{} on {}: {e}", path.display(), o.data.data.display()),
+        })?;
+    let p = series.output_dim();
+    let comparison = Comparison {
+        horizon,
+        burn_in: o.burn_in,
+        outputs: nalgebra::DMatrix::from_fn(p, series.steps(), |i, t| result.outputs[t * p + i]),
+        fit_percent: result.fit_percent.clone(),
+    };
+    Ok((comparison, file, result))
 }
 
 /// One panel per output: the measured output and each model's.

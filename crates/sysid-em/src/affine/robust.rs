@@ -371,6 +371,8 @@ where
     let mut round = 1;
     // the last round's ranking: the winner and the runner-up went equally far
     let mut last_round: Vec<(usize, f64)> = Vec::new();
+    // the best point any round scored: (estimate, loglik, start, round)
+    let mut best_seen: Option<(AffineParams, f64, usize, usize)> = None;
     loop {
         let live: Vec<usize> = (0..starts.len())
             .filter(|&k| starts[k].outcome.status == StartStatus::Explored)
@@ -414,6 +416,11 @@ where
             .filter_map(|&k| starts[k].outcome.loglik.map(|l| (k, l)))
             .collect();
         ranked.sort_by(|x, y| y.1.total_cmp(&x.1));
+        if let Some(&(k, l)) = ranked.first()
+            && best_seen.as_ref().is_none_or(|b| l > b.1)
+        {
+            best_seen = Some((starts[k].outcome.estimate.clone(), l, k, round));
+        }
         // scored starts that are not ranked (runaways, failures) are already out
         for &k in &live {
             if starts[k].outcome.status == StartStatus::Explored
@@ -582,6 +589,22 @@ where
             best.loglik
         ));
     }
+    // never an answer worse than a point the exploration scored: EM along a ridge the
+    // data cannot see (inseparable parameters) can walk downhill, and a variance can run
+    // away
+    let (estimate, loglik) = match best_seen {
+        Some((seen, seen_loglik, k, round)) if loglik < seen_loglik - SEPARATION_NATS => {
+            warnings.push(format!(
+                "the fit ended at a log-likelihood of {loglik:.2}, below {seen_loglik:.2}, \
+                 which start {} reached in round {round} of the exploration: that point is \
+                 returned instead; the iterations lost likelihood, which happens when \
+                 parameters cannot be separated or a variance runs away",
+                k + 1
+            ));
+            (seen, seen_loglik)
+        }
+        _ => (estimate, loglik),
+    };
     Ok(RobustFit {
         estimate,
         loglik,

@@ -109,6 +109,8 @@ pub(super) struct Job<'a> {
     pub(super) o: &'a Options,
     pub(super) file: DataFile,
     pub(super) options: CheckedAffineFitOptions,
+    /// Warnings found outside the fit (a model file's inseparable parameters).
+    pub(super) extra_warnings: Vec<String>,
 }
 
 /// The fit options of the command line (`--method`, `--particles`, `--smoother`,
@@ -163,7 +165,12 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
         Chosen::Linear(model, _) => model.output_dim(),
     };
     crate::commands::check_column_counts(&file, 0, outputs)?;
-    let job = Job { o, file, options };
+    let job = Job {
+        o,
+        file,
+        options,
+        extra_warnings: Vec::new(),
+    };
     let estimated = o
         .estimate_noise
         .as_deref()
@@ -278,6 +285,9 @@ where
     match &fit.report {
         AffineFitReport::Robust(robust) => report_robust(job, model, start, robust, seconds, row),
         AffineFitReport::Em { result, iterates } => {
+            for w in &job.extra_warnings {
+                crate::warn(w);
+            }
             let method = match fit.method {
                 AffineMethod::Em => job.o.smoother.as_str(),
                 _ => "psaem",
@@ -535,7 +545,7 @@ where
         "refinement": {"iterations": fit.refine_trace.len(), "particles": options.refine_particles,
             "averaged_last": fit.refine_trace.len() - fit.refine_trace.len() / 2,
             "settled": settled, "largest_change_last_quarters": change},
-        "warnings": fit.warnings,
+        "warnings": fit.warnings.iter().chain(&job.extra_warnings).collect::<Vec<_>>(),
     });
     let mut outputs = vec![(
         o.out.clone(),
@@ -552,7 +562,7 @@ where
     for (path, text) in &outputs {
         write_output(path, o.force, text)?;
     }
-    for w in &fit.warnings {
+    for w in fit.warnings.iter().chain(&job.extra_warnings) {
         crate::warn(w);
     }
     // the model file is the same on any machine; the timing goes to the report only

@@ -30,6 +30,22 @@ pub struct FitCommand {
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// `fit --model`: `likelihood` (the default: maximum likelihood with the file's
+    /// process and measurement noise, by particle EM; best for one-step prediction and
+    /// filtering) or `simulation` (the noise-free model's simulation error, minimised
+    /// over the free parameters and the initial state by Levenberg-Marquardt with exact
+    /// sensitivities, from the file's values and --starts - 1 perturbations of them;
+    /// best for a model that is to simulate from the inputs alone).
+    #[arg(long, default_value = "likelihood")]
+    pub criterion: String,
+    /// `--criterion simulation`: simulations allowed per run, in units of (number of
+    /// unknowns + 1).
+    #[arg(long, default_value_t = 100)]
+    pub patience: usize,
+    /// `--criterion simulation`: the spread of the perturbed starts on the log scale
+    /// (each free value times exp(spread N(0, 1)); 0.3 is about +-30 %).
+    #[arg(long, default_value_t = 0.3)]
+    pub spread: f64,
     /// Particle EM's settings (`fit --model`).
     #[command(flatten)]
     pub em: ParticleEmArgs,
@@ -90,7 +106,9 @@ pub struct ParticleEmArgs {
     #[arg(long, default_value = "robust")]
     pub method: String,
     /// Particle fits with `--method robust`: the number of starts (--init and
-    /// perturbations of it, each coefficient times U[0.5, 1.5]).
+    /// perturbations of it, each coefficient times U[0.5, 1.5]); `--criterion
+    /// simulation`: the runs (the file's values and perturbations of them, each free
+    /// value times exp(--spread N(0, 1))).
     #[arg(long, default_value_t = 8)]
     pub starts: usize,
 }

@@ -15,6 +15,8 @@ use sysid::em::Termination;
 use sysid::em::affine::AffineEmSpec;
 use sysid::modelfile::{FileFit, FileFitError, FileFitReport, ModelFile};
 
+mod simulation;
+
 fn bad(option: &'static str, message: impl Into<String>) -> CliError {
     CliError::BadOption {
         option,
@@ -42,8 +44,23 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .data
         .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
     let context = o.data.data.display().to_string();
-    let job = Job { o, file, options };
+    let job = Job {
+        o,
+        file,
+        options,
+        extra_warnings: Vec::new(),
+    };
     let series = series_of(&job.file, &context)?;
+    match o.criterion.as_str() {
+        "likelihood" => {}
+        "simulation" => return simulation::run(o, &model, series),
+        other => {
+            return Err(bad(
+                "--criterion",
+                format!("{other:?} is not a criterion: use likelihood or simulation"),
+            ));
+        }
+    }
     let affine = model.affine();
     let progress = match &affine {
         Some(_) => progress_of(&job),
@@ -66,6 +83,16 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let seconds = began.elapsed().as_secs_f64();
     match (&fit.report, affine) {
         (FileFitReport::Affine(report_of), Some(affine)) => {
+            // the fit's own warnings are the robust driver's, reported with it
+            let job = Job {
+                extra_warnings: fit
+                    .warnings
+                    .iter()
+                    .filter(|w| !matches!(w, sysid::modelfile::FileFitWarning::Robust(_)))
+                    .map(ToString::to_string)
+                    .collect(),
+                ..job
+            };
             let start = affine
                 .params(&model.free_values())
                 .map_err(|m| bad("--model", m.reason))?;
@@ -78,7 +105,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
 }
 
 /// A model file's fit error, named by the option or the data it comes from.
-fn file_error(o: &Options, e: FileFitError) -> CliError {
+pub(super) fn file_error(o: &Options, e: FileFitError) -> CliError {
     let context = o.data.data.display().to_string();
     match e {
         FileFitError::NothingFree { .. } => bad("--model", e.to_string()),

@@ -132,6 +132,12 @@ pub struct Options {
     pub starts: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     pub seed: u64,
+    /// `fit --model`: `likelihood` or `simulation`.
+    pub criterion: String,
+    /// `--criterion simulation`: simulations per run, in units of (unknowns + 1).
+    pub patience: usize,
+    /// `--criterion simulation`: the perturbations' spread on the log scale.
+    pub spread: f64,
     /// Particle fits: which noise covariances are estimated: `--estimate-noise` (or
     /// `=both`) both, `=q` the process noise only, `=r` the output noise only, `=none`
     /// neither (held at --init's values). Default: both for `--method robust` (which
@@ -188,6 +194,9 @@ impl Options {
             method: "robust".into(),
             starts: 8,
             seed: 1,
+            criterion: "likelihood".into(),
+            patience: 100,
+            spread: 0.3,
             estimate_noise: None,
             tol_nats: 1e-4,
             tol: None,
@@ -277,6 +286,9 @@ impl Options {
         o.model = a.model;
         o.max_iter = a.max_iter;
         o.seed = a.seed;
+        o.criterion = a.criterion;
+        o.patience = a.patience;
+        o.spread = a.spread;
         Some(o)
     }
 }

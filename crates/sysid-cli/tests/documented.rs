@@ -47,6 +47,7 @@ fn run_checked(lines: &[String], no_warnings: bool) -> PathBuf {
     let dir = scratch_dir();
     let data = root().join("crates/sysid-cli/tests/data/");
     let models = root().join("examples/models/");
+    let examples = root().join("examples/data/");
     for line in lines {
         let args: Vec<String> = line
             .split_whitespace()
@@ -54,6 +55,7 @@ fn run_checked(lines: &[String], no_warnings: bool) -> PathBuf {
             .map(|a| {
                 a.replace("crates/sysid-cli/tests/data/", data.to_str().unwrap())
                     .replace("examples/models/", models.to_str().unwrap())
+                    .replace("examples/data/", examples.to_str().unwrap())
             })
             .collect();
         let out = Command::new(env!("CARGO_BIN_EXE_sysid"))
@@ -161,6 +163,10 @@ fn every_command_of_the_guide_runs() {
             &["state p", "state v", "95 % band", "true state"][..],
         ),
         (
+            "tanks-figures/compare",
+            &["y: measured and the models' simulation", "measured"][..],
+        ),
+        (
             "heat-figures/compare",
             &["y1: measured and the models' simulation", "measured"][..],
         ),
@@ -180,6 +186,7 @@ fn every_command_of_the_guide_runs() {
         "heat1.json",
         "heat-pred5.csv",
         "nile-forecast.csv",
+        "tanks-fit.toml",
     ] {
         assert!(dir.join(file).exists(), "{file}");
     }

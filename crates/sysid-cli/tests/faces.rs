@@ -583,3 +583,97 @@ fn n4sid_auto_and_loglik_equal_the_library() {
         Some(library.to_bits())
     );
 }
+
+/// The cascaded-tanks example's columns `u`, `y` (read here, not by the binary).
+fn tanks_record(name: &str) -> (Vec<f64>, Vec<f64>) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/data")
+        .join(name);
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let cells: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+            (cells[1], cells[2])
+        })
+        .unzip()
+}
+
+#[test]
+fn compare_and_the_simulation_error_fit_of_a_model_file_equal_the_library() {
+    use sysid::modelfile::{InitialState as Start0, ModelFile, SimulationFitOptions};
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let fitted = examples.join("models/cascaded_tanks_fitted.toml");
+    let (u, y) = tanks_record("cascaded_tanks_val.csv");
+    let series = sysid::smc::Series::new(&y, 1)
+        .unwrap()
+        .with_inputs(&u, 1)
+        .unwrap();
+    let library = ModelFile::read(&fitted)
+        .unwrap()
+        .compare_simulation(series, Start0::Estimate { samples: 5 }, 0)
+        .unwrap();
+    let run = sysid(&[
+        "compare",
+        "--model",
+        s(&fitted),
+        "--data",
+        s(&examples.join("data/cascaded_tanks_val.csv")),
+        "--initial-samples",
+        "5",
+        "--json",
+    ]);
+    let summary = json_of(&run);
+    let model = &summary["models"][0];
+    assert_eq!(model["rms"][0].as_f64(), Some(library.rms[0]));
+    assert_eq!(
+        model["fit_percent"][0].as_f64(),
+        Some(library.fit_percent[0])
+    );
+    assert_eq!(
+        model["initial_state"][1].as_f64(),
+        Some(library.initial_state[1])
+    );
+
+    // a short simulation-error fit: the written file and the summary are the library's
+    let start = examples.join("models/cascaded_tanks.toml");
+    let (u, y) = tanks_record("cascaded_tanks_est.csv");
+    let series = sysid::smc::Series::new(&y, 1)
+        .unwrap()
+        .with_inputs(&u, 1)
+        .unwrap();
+    let options = SimulationFitOptions {
+        starts: 3,
+        seed: 4,
+        ..SimulationFitOptions::default()
+    };
+    let fit = ModelFile::read(&start)
+        .unwrap()
+        .fit_simulation_error(series, &options, &|| false)
+        .unwrap();
+    let dir = scratch_dir();
+    let out = dir.join("tanks.toml");
+    let run = sysid(&[
+        "fit",
+        "--model",
+        s(&start),
+        "--data",
+        s(&examples.join("data/cascaded_tanks_est.csv")),
+        "--criterion",
+        "simulation",
+        "--starts",
+        "3",
+        "--seed",
+        "4",
+        "--out",
+        s(&out),
+        "--json",
+    ]);
+    let summary = json_of(&run);
+    assert_eq!(summary["rms"][0].as_f64(), Some(fit.rms[0]));
+    let written = ModelFile::read(&out).unwrap();
+    assert_eq!(written.free_values(), fit.estimate);
+    assert_eq!(written.initial_means(), fit.initial_state);
+    let warnings: Vec<String> = fit.warnings.iter().map(ToString::to_string).collect();
+    assert_eq!(summary["warnings"], serde_json::json!(warnings));
+}

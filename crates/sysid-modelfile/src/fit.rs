@@ -97,6 +97,16 @@ pub enum FileFitWarning {
         /// simulation Jacobian.
         ratio: f64,
     },
+    /// A parameter ended at one of its bounds: the data pull it beyond, so either the
+    /// bound is a physical fact the data contradict or the term is not needed.
+    AtBound {
+        /// The parameter.
+        name: String,
+        /// Its estimate.
+        value: f64,
+        /// The bound it reached.
+        bound: f64,
+    },
     /// The simulation-error fit's best run stopped before its convergence test held.
     NotConverged {
         /// MINPACK's reason.
@@ -125,6 +135,12 @@ impl std::fmt::Display for FileFitWarning {
                  one, so only a combination of them is estimated; fix one of them (fixed = true) or \
                  add a measurement that sees it",
                 names.join(", ")
+            ),
+            FileFitWarning::AtBound { name, value, bound } => write!(
+                f,
+                "{name} = {value:.3e} ended at its bound {bound}: its standard error means \
+                 little; the data would move it past the bound (drop the term, or fix {name} \
+                 at {bound} if the bound is physical)"
             ),
             FileFitWarning::NotConverged { reason } => write!(
                 f,

@@ -548,6 +548,19 @@ impl ModelFile {
                 ratio: found.ratio,
             });
         }
+        for (&k, s) in params.iter().zip(&supports) {
+            if let Support::Interval(low, high) = *s {
+                let v = values[k];
+                let near = 1e-6 * (high - low);
+                if v - low < near || high - v < near {
+                    warnings.push(FileFitWarning::AtBound {
+                        name: spec.parameters[k].name.clone(),
+                        value: v,
+                        bound: if v - low < near { low } else { high },
+                    });
+                }
+            }
+        }
         if !starts[best_run].converged && !interrupted {
             warnings.push(FileFitWarning::NotConverged {
                 reason: starts[best_run].termination.clone(),
@@ -615,10 +628,12 @@ fn standard_errors(jacobian: &[f64], rows: usize, cols: usize, sse: f64) -> Opti
 }
 
 /// How the initial state of a simulation is chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum InitialState {
     /// The model file's initial means.
     File,
+    /// This state.
+    Given(Vec<f64>),
     /// The state that minimises the squared simulation error over the first
     /// `samples` samples (Levenberg–Marquardt from the file's initial means, the
     /// parameters held), as benchmark protocols and MATLAB's `compare` do.
@@ -717,6 +732,7 @@ impl ModelFile {
     ) -> Result<SimulationComparison, SimulationError> {
         let x0 = match initial {
             InitialState::File => self.initial_means(),
+            InitialState::Given(x0) => x0,
             InitialState::Estimate { samples } => self.estimate_initial_state(data, samples)?,
         };
         let inputs: Vec<f64> = (0..data.steps())

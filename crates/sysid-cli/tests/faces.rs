@@ -677,3 +677,37 @@ fn compare_and_the_simulation_error_fit_of_a_model_file_equal_the_library() {
     let warnings: Vec<String> = fit.warnings.iter().map(ToString::to_string).collect();
     assert_eq!(summary["warnings"], serde_json::json!(warnings));
 }
+
+#[test]
+fn simulate_noise_free_of_a_model_file_equals_the_library() {
+    use sysid::modelfile::ModelFile;
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let fitted = examples.join("models/cascaded_tanks_fitted.toml");
+    let (u, _) = tanks_record("cascaded_tanks_val.csv");
+    let library = ModelFile::read(&fitted)
+        .unwrap()
+        .simulate_noise_free(&u, u.len(), None)
+        .unwrap();
+    let dir = scratch_dir();
+    let out = dir.join("sim.csv");
+    let run = sysid(&[
+        "simulate",
+        "--model",
+        s(&fitted),
+        "--data",
+        s(&examples.join("data/cascaded_tanks_val.csv")),
+        "--noise-free",
+        "--states",
+        "--out",
+        s(&out),
+    ]);
+    assert_ok(&run);
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("t,u,y,h1,h2"));
+    for (t, line) in lines.enumerate() {
+        let cells: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        assert_eq!(cells[2], library.outputs[t], "y at row {t}");
+        assert_eq!(cells[3], library.states[2 * t], "h1 at row {t}");
+    }
+}

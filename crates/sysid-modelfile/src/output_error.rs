@@ -657,6 +657,29 @@ pub struct SimulationComparison {
 }
 
 impl ModelFile {
+    /// The noise-free simulation of `steps` steps of the inputs `inputs` (time-major,
+    /// `steps x m`) from `x0`, or from the file's initial means, at the file's values.
+    ///
+    /// # Errors
+    /// See [`Simulator::run`].
+    pub fn simulate_noise_free(
+        &self,
+        inputs: &[f64],
+        steps: usize,
+        x0: Option<&[f64]>,
+    ) -> Result<crate::NoiseFree, SimulationError> {
+        let means;
+        let x0 = match x0 {
+            Some(x0) => x0,
+            None => {
+                means = self.initial_means();
+                &means
+            }
+        };
+        let values = self.full_values(&self.free_values());
+        Simulator::new(self, &[]).run(&values, x0, inputs, steps, false)
+    }
+
     /// The initial state that minimises the squared simulation error over the first
     /// `samples` samples of `data`, the parameters at the file's values
     /// (Levenberg–Marquardt from the file's initial means).

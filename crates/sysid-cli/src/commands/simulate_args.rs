@@ -33,6 +33,10 @@ pub struct Options {
     /// (seeded by --seed), started from the initial state chosen by --x0.
     #[arg(long)]
     pub noise: bool,
+    /// With a nonlinear model file (`.toml`): the noise-free simulation (every noise
+    /// term zero) from the file's initial means, instead of one noisy realisation.
+    #[arg(long, requires = "model", conflicts_with = "noise")]
+    pub noise_free: bool,
     /// Number of time steps.
     #[arg(long, default_value_t = 1000)]
     pub steps: usize,

@@ -280,12 +280,18 @@ fn run_model_file(o: &Options, path: &std::path::Path) -> Result<(), CliError> {
         &format!("{steps} steps"),
         8.0 * steps as f64 * (n + p + spec.inputs.len()) as f64 * 2.0,
     )?;
-    let (states, outputs) =
+    let simulated = if o.noise_free {
+        file.simulate_noise_free(&inputs, steps, None)
+            .map(|run| (run.states, run.outputs))
+            .map_err(|e| e.to_string())
+    } else {
         smc.simulate(steps, &inputs, o.seed)
-            .map_err(|message| CliError::BadOption {
-                option: "--model",
-                message: format!("{}: {message}", path.display()),
-            })?;
+            .map_err(|message| message.to_string())
+    };
+    let (states, outputs) = simulated.map_err(|message| CliError::BadOption {
+        option: "--model",
+        message: format!("{}: {message}", path.display()),
+    })?;
     let mut w = create_output(&o.out, o.force)?;
     let io = |source| CliError::Io {
         path: o.out.clone(),
@@ -312,10 +318,11 @@ fn run_model_file(o: &Options, path: &std::path::Path) -> Result<(), CliError> {
     crate::report(
         o.json,
         serde_json::json!({"command": "simulate", "model": path, "steps": steps,
-            "seed": o.seed, "out": o.out}),
+            "seed": o.seed, "out": o.out, "noise_free": o.noise_free}),
         || {
             format!(
-                "wrote {steps} steps of {} to {}",
+                "wrote {steps} {}steps of {} to {}",
+                if o.noise_free { "noise-free " } else { "" },
                 path.display(),
                 o.out.display()
             )

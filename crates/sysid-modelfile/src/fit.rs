@@ -128,12 +128,19 @@ impl std::fmt::Display for FileFitWarning {
                 "{name} is still moving ({from} -> {to} between the last two quarters of the \
                  iterations): run more iterations (--max-iter)"
             ),
+            FileFitWarning::Inseparable { names, ratio } if names.len() == 1 => write!(
+                f,
+                "{} barely changes the simulated output on these data ({ratio:.1e} times as \
+                 much as the most visible direction): its value is not determined by them; \
+                 fix it (fixed = true) or use data that excite it",
+                names[0]
+            ),
             FileFitWarning::Inseparable { names, ratio } => write!(
                 f,
                 "{} cannot be separated by these data: along one direction of them the \
                  simulated output changes {ratio:.1e} times as much as along the most visible \
-                 one, so only a combination of them is estimated; fix one of them (fixed = true) or \
-                 add a measurement that sees it",
+                 one, so only a combination of them is estimated; fix one of them (fixed = \
+                 true) or add a measurement that sees it",
                 names.join(", ")
             ),
             FileFitWarning::AtBound { name, value, bound } => write!(

@@ -12,6 +12,7 @@ mod errors;
 mod linear;
 mod particle;
 mod run;
+mod simulation;
 mod studies;
 
 use pyo3::prelude::*;
@@ -22,6 +23,7 @@ fn _sysid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     linear::register(m)?;
     particle::register(m)?;
+    simulation::register(m)?;
     studies::register(m)?;
     Ok(())
 }

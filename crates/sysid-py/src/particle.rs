@@ -30,7 +30,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// pickling and this for the computations).
 #[pyclass(frozen, module = "sysid._sysid")]
 pub(crate) struct CompiledModel {
-    file: ModelFile,
+    pub(crate) file: ModelFile,
 }
 
 #[pymethods]
@@ -91,7 +91,7 @@ impl CompiledModel {
     }
 
     /// The record's column counts checked against the model's.
-    fn check(&self, data: &Record) -> Result<(), Failure> {
+    pub(crate) fn check(&self, data: &Record) -> Result<(), Failure> {
         let spec = self.file.spec();
         let (p, m) = (spec.outputs.len(), spec.inputs.len());
         if data.y.nrows() != p || data.u.nrows() != m {
@@ -109,7 +109,7 @@ impl CompiledModel {
 }
 
 /// The library's series over a record's matrices (time-major, as they are stored).
-fn series_of(data: &Record) -> Result<Series<'_>, Failure> {
+pub(crate) fn series_of(data: &Record) -> Result<Series<'_>, Failure> {
     Series::new(data.y.as_slice(), data.y.nrows())
         .and_then(|s| s.with_inputs(data.u.as_slice(), data.u.nrows()))
         .map_err(Failure::sysid)

@@ -71,6 +71,32 @@ class ModelFile:
     def _signals(self, data, u, time):
         return signals(data, u, time, model_names=(self.inputs, self.outputs))
 
+    def simulate(self, u=None, *, steps=None, x0=None):
+        """``sysid simulate --model --noise-free``: the noise-free simulation (every noise
+        term zero) of the inputs ``u`` (``(T,)`` or ``(T, m)``; for a model without
+        inputs give ``steps``) from ``x0`` or the file's initial means. Returns
+        ``(states, outputs)``, arrays ``(T, n)`` and ``(T, p)``."""
+        if u is None:
+            if steps is None:
+                raise OptionError("give the inputs u, or steps for a model without inputs", "steps")
+            u = np.zeros((int(steps), 0))
+        u = np.asarray(u, dtype=float)
+        if u.ndim == 1:
+            u = u.reshape(-1, 1)
+        steps = u.shape[0] if steps is None else int(steps)
+        x0 = None if x0 is None else [float(v) for v in x0]
+        return _sysid.simulate_noise_free(self._compiled, np.ascontiguousarray(u), steps, x0)
+
+    def compare(self, data, u=None, *, initial_samples=None, x0=None, burn_in=0, time=None):
+        """``sysid compare --model``: the noise-free simulation of a record's inputs,
+        scored against its outputs (RMS and MATLAB's fit per output), from the initial
+        state that minimises the simulation error over the first ``initial_samples``
+        samples (the whole record by default), or from ``x0``."""
+        s = self._signals(data, u, time)
+        x0 = None if x0 is None else [float(v) for v in x0]
+        raw = _sysid.compare_simulation(self._compiled, s.y, s.u, initial_samples, x0, burn_in)
+        return SimulationComparison(raw, self.outputs)
+
     def __repr__(self):
         return f"ModelFile({self.origin!r}, params={self.params})"
 
@@ -151,13 +177,81 @@ class ModelFitResults:
         return isinstance(other, ModelFitResults) and _same(self._raw, other._raw)
 
 
-def fit(model, data, u=None, *, method="robust", particles=100, smoother="tanizaki",
-        max_iter=500, starts=8, seed=1, time=None, progress=None, threads=None, strict=False):
-    """``sysid fit --model``: maximum likelihood for a model file's free parameters, by
-    the method the command line chooses: closed-form particle EM when the equations are
-    affine in them (``method`` ``robust``, ``em`` or ``psaem``), gradient EM otherwise."""
+class SimulationComparison:
+    """A model file's noise-free simulation of a record: ``outputs`` ``(T, p)``,
+    ``rms`` and ``fit_percent`` by output name, ``initial_state``."""
+
+    def __init__(self, raw, names):
+        self.outputs = np.asarray(raw["outputs"])
+        self.initial_state = list(raw["initial_state"])
+        self.rms = dict(zip(names, raw["rms"]))
+        self.fit_percent = dict(zip(names, raw["fit_percent"]))
+
+    def __repr__(self):
+        return f"<SimulationComparison rms={self.rms} fit_percent={self.fit_percent}>"
+
+
+class SimulationFitResults:
+    """``sysid fit --model --criterion simulation``: the fitted model file (the estimated
+    initial state as its initial means), ``params``, ``bse`` (standard errors),
+    ``initial_state``, ``rms`` and ``fit_percent`` on the estimation record, every
+    Levenberg-Marquardt run (``runs``: rms, evaluations, termination, converged), and
+    the warnings (inseparable parameters, a bound reached, no convergence)."""
+
+    def __init__(self, raw, origin="<fit>"):
+        self._raw = dict(raw)
+        self.model = ModelFile.from_string(raw["text"], origin)
+        self.param_names = list(raw["names"])
+        self.initial_state = list(raw["initial_state"])
+        outputs = self.model.outputs
+        self.rms = dict(zip(outputs, raw["rms"]))
+        self.fit_percent = dict(zip(outputs, raw["fit_percent"]))
+        self.runs = [dict(zip(("rms", "evaluations", "termination", "converged"), r))
+                     for r in raw["runs"]]
+        self.best = raw["best"]
+        self.interrupted = raw["interrupted"]
+        self.warnings = list(raw["warnings"])
+
+    @property
+    def params(self):
+        return dict(zip(self.param_names, self._raw["estimate"]))
+
+    @property
+    def bse(self):
+        return dict(zip(self.param_names, self._raw["standard_errors"]))
+
+    def __reduce__(self):
+        return (SimulationFitResults, (self._raw, self.model.origin))
+
+    def __repr__(self):
+        return (f"<SimulationFitResults params={self.params} rms={self.rms} "
+                f"interrupted={self.interrupted} warnings={len(self.warnings)}>")
+
+    def __eq__(self, other):
+        return isinstance(other, SimulationFitResults) and _same(self._raw, other._raw)
+
+
+def fit(model, data, u=None, *, criterion="likelihood", method="robust", particles=100,
+        smoother="tanizaki", max_iter=500, starts=8, seed=1, spread=0.3, patience=100,
+        time=None, progress=None, threads=None, strict=False):
+    """``sysid fit --model``. ``criterion="likelihood"`` (the default): maximum
+    likelihood for a model file's free parameters, by the method the command line
+    chooses: closed-form particle EM when the equations are affine in them (``method``
+    ``robust``, ``em`` or ``psaem``), gradient EM otherwise. ``criterion="simulation"``:
+    the noise-free model's simulation error minimised over the free parameters and the
+    initial state (Levenberg-Marquardt from the file's values and ``starts - 1``
+    perturbations, each value times ``exp(spread N(0, 1))``); returns
+    ``SimulationFitResults``."""
     model = _model(model)
     s = model._signals(data, u, time)
+    if criterion == "simulation":
+        with partial_as(lambda raw: SimulationFitResults(raw, model.origin)):
+            raw = _sysid.fit_simulation(model._compiled, s.y, s.u, starts, spread, patience,
+                                        seed, progress, threads)
+        return report(SimulationFitResults(raw, model.origin), strict, "fit")
+    if criterion != "likelihood":
+        raise OptionError(f"{criterion!r} is not a criterion: use likelihood or simulation",
+                          "criterion")
     with partial_as(lambda raw: ModelFitResults(raw, model.origin)):
         raw = _sysid.fit_model(model._compiled, s.y, s.u, method, particles, smoother,
                                max_iter, starts, seed, progress, threads)

@@ -97,6 +97,12 @@ pub enum FileFitWarning {
         /// simulation Jacobian.
         ratio: f64,
     },
+    /// Gradient EM ran but no M-step moved the parameters from the start: the estimate
+    /// is the start.
+    NoProgress {
+        /// Iterations made.
+        iterations: usize,
+    },
     /// A parameter ended at one of its bounds: the data pull it beyond, so either the
     /// bound is a physical fact the data contradict or the term is not needed.
     AtBound {
@@ -142,6 +148,12 @@ impl std::fmt::Display for FileFitWarning {
                  one, so only a combination of them is estimated; fix one of them (fixed = \
                  true) or add a measurement that sees it",
                 names.join(", ")
+            ),
+            FileFitWarning::NoProgress { iterations } => write!(
+                f,
+                "gradient EM made {iterations} iterations without moving any parameter from \
+                 its start: the estimate is the start, not a fit (the M-step found no \
+                 ascent; try a start nearer the data, or --criterion simulation)"
             ),
             FileFitWarning::AtBound { name, value, bound } => write!(
                 f,
@@ -348,7 +360,20 @@ impl ModelFile {
         };
         let result = run_em(&mut em, start, options.em(), &mut values);
         let estimate = gradient.constrained(&result.estimate);
-        let warnings = settling(&self.free_names(), &values.rows);
+        let mut warnings = settling(&self.free_names(), &values.rows);
+        let start_values = self.free_values();
+        let unmoved = estimate
+            .iter()
+            .zip(&start_values)
+            .all(|(e, s)| (e - s).abs() <= 1e-9 * s.abs().max(1e-12));
+        if unmoved && result.iterations > 0 {
+            warnings.insert(
+                0,
+                FileFitWarning::NoProgress {
+                    iterations: result.iterations,
+                },
+            );
+        }
         Ok(FileFit {
             fitted: self.with_values(&estimate),
             estimate,

@@ -259,3 +259,53 @@ h2 = { mean = 3, variance = 1 }
     .unwrap();
     assert_eq!(fixed.inseparable_on(series), None);
 }
+
+#[test]
+fn gradient_em_that_cannot_move_says_so() {
+    // `top` caps a state that never comes near it: no M-step can find an ascent
+    let text = r#"
+format = 1
+states = ["x"]
+outputs = ["y"]
+[parameters]
+top = { value = 50.0 }
+[transition]
+x = "min(0.5*x + 1, top)"
+[observation]
+y = "x"
+[noise]
+x = 0.1
+y = 0.1
+[initial]
+x = { mean = 2, variance = 0.1 }
+"#;
+    let file = ModelFile::parse(text, "cap.toml").unwrap();
+    let y: Vec<f64> = (0..30)
+        .map(|t| 2.0 + 0.1 * ((t as f64) * 0.9).sin())
+        .collect();
+    let mut options = sysid_em::affine::AffineFitOptions::default();
+    options.particles = 20;
+    options.iterations = 3;
+    let options = options.check().unwrap();
+    let fit = file
+        .fit(
+            Series::new(&y, 1).unwrap(),
+            &options,
+            &sysid_em::FitRun::new(1),
+            &mut (),
+        )
+        .unwrap();
+    assert_eq!(fit.estimate, vec![50.0]);
+    assert!(
+        matches!(
+            fit.warnings[0],
+            sysid_modelfile::FileFitWarning::NoProgress { iterations: 3 }
+        ),
+        "{:?}",
+        fit.warnings
+    );
+    assert!(fit.warnings.iter().any(|w| matches!(
+        w,
+        sysid_modelfile::FileFitWarning::Inseparable { names, .. } if names == &["top"]
+    )));
+}

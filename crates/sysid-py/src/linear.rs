@@ -15,7 +15,10 @@ use sysid::kalman::{
     InitialState, KalmanWorkspace, LinearGaussianModel, Metadata, ModelSpec, Record, Trend,
     TrendKind,
 };
-use sysid::subspace::{Criterion, Focus, N4sidOptions, Order, Weighting, n4sid};
+use sysid::subspace::{
+    Criterion, Focus, N4sidOptions, Order, WeightedN4sid, Weighting, WeightingChoice,
+    n4sid_weighted,
+};
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(loglik, m)?)?;
@@ -124,9 +127,13 @@ fn loglik(
     Ok(run.value?)
 }
 
+/// One weighting of `weighting="auto"`: name, order, spectral radius, stable, one-step
+/// prediction fit.
+type WeightingRow = (String, Option<usize>, Option<f64>, bool, Option<f64>);
+
 /// `sysid n4sid`: the subspace model (JSON), and what the command reports.
 #[pyfunction]
-#[pyo3(name = "n4sid", signature = (y, u=None, order=None, block_rows=None, weighting="moesp",
+#[pyo3(name = "n4sid", signature = (y, u=None, order=None, block_rows=None, weighting="auto",
     focus="prediction", criterion="bic", stable=false, detrend=None, time=None))]
 #[allow(clippy::too_many_arguments)]
 fn n4sid_fit<'py>(
@@ -142,15 +149,19 @@ fn n4sid_fit<'py>(
     detrend: Option<&str>,
     time: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let choice = WeightingChoice::parse(weighting).ok_or_else(|| {
+        Failure::option(
+            "weighting",
+            format!("unknown weighting {weighting:?} (known: auto, n4sid, moesp, cva)"),
+        )
+    })?;
     let options = N4sidOptions {
         order: order.map_or(Order::Auto, Order::Fixed),
         block_rows,
-        weighting: Weighting::parse(weighting).ok_or_else(|| {
-            Failure::option(
-                "weighting",
-                format!("unknown weighting {weighting:?} (known: n4sid, moesp, cva)"),
-            )
-        })?,
+        weighting: match choice {
+            WeightingChoice::Fixed(w) => w,
+            WeightingChoice::Auto => Weighting::Moesp,
+        },
         focus: match focus {
             "prediction" => Focus::Prediction,
             "simulation" => Focus::Simulation,
@@ -185,8 +196,10 @@ fn n4sid_fit<'py>(
             Some(trend)
         }
     };
-    let run = supervise(py, None, &Progress::None, 1, |_| n4sid(&data, &options))?;
-    let result = run.value.map_err(Failure::sysid)?;
+    let run = supervise(py, None, &Progress::None, 1, |_| {
+        n4sid_weighted(&data, &options, choice)
+    })?;
+    let WeightedN4sid { result, candidates } = run.value.map_err(Failure::sysid)?;
     let described = match &trend {
         Some(t) => t.written_model(&result.model).map_err(Failure::sysid)?,
         None => result.model.clone(),
@@ -213,6 +226,20 @@ fn n4sid_fit<'py>(
     out.set_item("singular_values", result.singular_values.clone())?;
     out.set_item("spectral_radius", result.spectral_radius)?;
     out.set_item("stabilised", result.stabilised)?;
+    out.set_item("weighting", result.weighting.name())?;
+    let weightings: Vec<WeightingRow> = candidates
+        .iter()
+        .map(|c| {
+            (
+                c.weighting.name().to_string(),
+                c.order,
+                c.spectral_radius,
+                c.usable(),
+                c.prediction_fit,
+            )
+        })
+        .collect();
+    out.set_item("weightings", weightings)?;
     out.set_item("warnings", warnings)?;
     Ok(out)
 }

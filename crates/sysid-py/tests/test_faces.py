@@ -91,6 +91,10 @@ def test_n4sid_equals_the_command(tmp_path):
     assert list(res.singular_values) == summary["singular_values"]
     assert res.spectral_radius == summary["spectral_radius"]
     assert res.warnings == summary["warnings"]
+    assert res.weighting == summary["weighting"]
+    assert [(w["weighting"], w["prediction_fit"], w["stable"]) for w in res.weightings] == [
+        (w["weighting"], w["prediction_fit"], w["stable"]) for w in summary["weightings"]]
+    assert len(res.weightings) == 3
     ours, theirs = json.loads(res.model.to_json()), json.loads(out.read_text())
     for key in ENTRIES:
         if key in theirs:

@@ -16,12 +16,14 @@
 //! assert!(fit.singular_values[0] > 10.0 * fit.singular_values[1]);
 //! ```
 
+mod auto_weighting;
 mod error;
 mod input_fit;
 mod n4sid;
 mod warning;
 mod weighting;
 
+pub use auto_weighting::{WeightedN4sid, WeightingChoice, WeightingScore, n4sid_weighted};
 pub use error::SubspaceError;
 pub use n4sid::{
     AUTO_MAX_ORDER, Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, OrderScore,

@@ -2,7 +2,10 @@ use crate::DataArgs;
 use crate::error::CliError;
 use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
-use sysid::subspace::{Criterion, Focus, InputMethod, N4sidOptions, Order, Weighting, n4sid};
+use sysid::subspace::{
+    Criterion, Focus, InputMethod, N4sidOptions, Order, WeightedN4sid, Weighting, WeightingChoice,
+    n4sid_weighted,
+};
 
 /// Options of `sysid n4sid`.
 #[derive(clap::Args, Debug)]
@@ -16,8 +19,10 @@ pub struct Options {
     /// Block rows of the Hankel matrices (default: max(10, ceil((n + 1) / p) + 1)).
     #[arg(long)]
     pub block_rows: Option<usize>,
-    /// SVD weighting: `moesp`, `n4sid` or `cva`.
-    #[arg(long, default_value = "moesp")]
+    /// SVD weighting: `auto` (the default: MOESP, N4SID and CVA are all fitted and the
+    /// stable model with the best one-step prediction fit on the data is kept; the
+    /// three are reported), `moesp`, `n4sid` or `cva`.
+    #[arg(long, default_value = "auto")]
     pub weighting: String,
     /// `mean` removes each signal's mean before the identification and folds the means
     /// into the written model's offset h (and mu), so that it describes the original
@@ -108,10 +113,20 @@ pub fn subspace_options(
 }
 
 pub fn run(o: &Options) -> Result<(), CliError> {
+    let choice = WeightingChoice::parse(&o.weighting).ok_or_else(|| CliError::BadOption {
+        option: "--weighting",
+        message: format!(
+            "unknown weighting {:?} (known: auto, n4sid, moesp, cva)",
+            o.weighting
+        ),
+    })?;
     let options = subspace_options(
         parse_order(&o.order)?,
         o.block_rows,
-        &o.weighting,
+        match choice {
+            WeightingChoice::Fixed(w) => w.name(),
+            WeightingChoice::Auto => "moesp",
+        },
         &o.focus,
         &o.criterion,
         o.stable,
@@ -121,9 +136,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     file.require_outputs(&o.data.data)?;
     let trend = super::detrend::apply(&mut file, super::detrend::parse(&o.detrend)?)?;
     let spinner = crate::progress::Progress::spinner("n4sid", o.json);
-    let result = n4sid(&file.record, &options);
+    let weighted = n4sid_weighted(&file.record, &options, choice);
     spinner.finish();
-    let result = result?;
+    let WeightedN4sid { result, candidates } = weighted?;
     let described = super::detrend::written_model(&result.model, trend.as_ref())?;
     let mut spec = ModelSpec::from_model(&described);
     let chosen = result.order_scores.iter().find(|s| s.order == result.order);
@@ -162,6 +177,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                     InputMethod::StateEquations => "state_equations",
                 },
                 "order_scores": scores, "warnings": warnings, "out": o.out,
+                "weightings": candidates.iter().map(|c| serde_json::json!({
+                    "weighting": c.weighting.name(), "order": c.order,
+                    "spectral_radius": c.spectral_radius, "stable": c.usable(),
+                    "prediction_fit": c.prediction_fit, "error": c.error,
+                })).collect::<Vec<_>>(),
             })
             .to_string(),
         );
@@ -181,6 +201,28 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             shown.join(" "),
             o.out.display()
         ));
+        if !candidates.is_empty() {
+            let rows: Vec<String> = candidates
+                .iter()
+                .map(|c| match (c.order, c.spectral_radius, c.prediction_fit) {
+                    (Some(n), Some(r), Some(f)) => format!(
+                        "{} order {n}, radius {r:.4}{}, one-step fit {f:.2} %",
+                        c.weighting.name(),
+                        if r < 1.0 { "" } else { " (unstable)" }
+                    ),
+                    _ => format!(
+                        "{}: {}",
+                        c.weighting.name(),
+                        c.error.as_deref().unwrap_or("failed")
+                    ),
+                })
+                .collect();
+            crate::say(&format!(
+                "weighting auto (kept {}): {}",
+                result.weighting.name(),
+                rows.join("; ")
+            ));
+        }
         if !result.order_scores.is_empty() {
             let table: Vec<String> = result
                 .order_scores

@@ -197,6 +197,11 @@ class N4sidResults:
         self.singular_values = np.array(raw["singular_values"])
         self.spectral_radius = raw["spectral_radius"]
         self.stabilised = raw["stabilised"]
+        self.weighting = raw["weighting"]
+        # weighting="auto": each weighting's order, spectral radius, stability and
+        # one-step prediction fit (%) on the data
+        self.weightings = [dict(zip(("weighting", "order", "spectral_radius", "stable",
+                                     "prediction_fit"), w)) for w in raw["weightings"]]
         self.warnings = list(raw["warnings"])
 
     def __repr__(self):
@@ -209,11 +214,13 @@ class N4sidResults:
             for a, b in zip(self.__dict__.values(), other.__dict__.values()))
 
 
-def n4sid(data, order="auto", u=None, *, block_rows=None, weighting="moesp",
+def n4sid(data, order="auto", u=None, *, block_rows=None, weighting="auto",
           focus="prediction", criterion="bic", stable=False, detrend=None, time=None,
           strict=False):
     """``sysid n4sid``: a subspace fit (N4SID/MOESP/CVA) of ``order`` states, or the
-    order chosen by ``criterion`` (``order="auto"``)."""
+    order chosen by ``criterion`` (``order="auto"``). ``weighting="auto"`` fits all three
+    weightings and keeps the stable model with the best one-step prediction fit
+    (``.weightings`` reports them)."""
     s = signals(data, u, time)
     if order == "auto" or order is None:
         order = None

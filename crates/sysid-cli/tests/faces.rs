@@ -711,3 +711,63 @@ fn simulate_noise_free_of_a_model_file_equals_the_library() {
         assert_eq!(cells[3], library.states[2 * t], "h1 at row {t}");
     }
 }
+
+#[test]
+fn n4sid_says_when_stabilising_destroyed_the_model_as_the_library_measures_it() {
+    use sysid::subspace::{N4sidOptions, Order, Weighting, n4sid, stabilised_fit};
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/daisy/CD_player_arm.csv");
+    let dir = scratch_dir();
+    let run = sysid(&[
+        "n4sid",
+        "--data",
+        s(&path),
+        "--order",
+        "5",
+        "--weighting",
+        "n4sid",
+        "--stable",
+        "--out",
+        s(&dir.join("m.json")),
+        "--json",
+    ]);
+    let summary = json_of(&run);
+    let record = read_csv(&path, None).record;
+    let options = N4sidOptions {
+        order: Order::Fixed(5),
+        weighting: Weighting::N4sid,
+        stable: true,
+        ..Default::default()
+    };
+    let result = n4sid(&record, &options).unwrap();
+    let fit = stabilised_fit(&record, &result, &options).expect("A needed stabilising");
+    assert!(
+        fit.destroyed() && fit.unstabilised_prediction_fit.unwrap() > 80.0,
+        "{fit:?}"
+    );
+    let reported = &summary["stabilised_fit"];
+    assert_eq!(
+        reported["simulation_fit"].as_f64(),
+        Some(fit.simulation_fit)
+    );
+    assert_eq!(reported["destroyed"], serde_json::json!(true));
+    let warnings = summary["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().starts_with("stabilising destroyed"))
+    );
+    // the default weighting finds a stable model by itself at this order
+    let auto = json_of(&sysid(&[
+        "n4sid",
+        "--data",
+        s(&path),
+        "--order",
+        "5",
+        "--out",
+        s(&dir.join("a.json")),
+        "--json",
+    ]));
+    assert_eq!(auto["stable"], serde_json::json!(true));
+    assert_eq!(auto["stabilised"], serde_json::json!(false));
+}

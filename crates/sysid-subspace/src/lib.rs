@@ -20,6 +20,7 @@ mod auto_weighting;
 mod error;
 mod input_fit;
 mod n4sid;
+mod stabilised;
 mod warning;
 mod weighting;
 
@@ -29,5 +30,6 @@ pub use n4sid::{
     AUTO_MAX_ORDER, Criterion, Focus, InputMethod, N4sidOptions, N4sidResult, Order, OrderScore,
     auto_order, n4sid, spectral_radius,
 };
+pub use stabilised::{DESTROYED_FIT, StabilisedFit, stabilised_fit};
 pub use warning::SubspaceWarning;
 pub use weighting::Weighting;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use sysid::kalman::ModelSpec;
 use sysid::subspace::{
     Criterion, Focus, InputMethod, N4sidOptions, Order, WeightedN4sid, Weighting, WeightingChoice,
-    n4sid_weighted,
+    n4sid_weighted, stabilised_fit,
 };
 
 /// Options of `sysid n4sid`.
@@ -150,11 +150,24 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         ..crate::files::metadata_of(&file, &o.data.data)
     });
     crate::files::write_model(&o.out, o.force, &spec)?;
-    let warnings: Vec<String> = result
+    let stabilised = stabilised_fit(&file.record, &result, &options);
+    let mut warnings: Vec<String> = result
         .warnings(&options)
         .iter()
         .map(ToString::to_string)
         .collect();
+    if let Some(s) = stabilised.as_ref().filter(|s| s.destroyed()) {
+        warnings.push(format!(
+            "stabilising destroyed the model: its simulation fit on the data is {:.1} % \
+             (one-step prediction {:.1} %, {} before stabilising); do not use it to \
+             simulate: try another order, or --weighting auto (a weighting that is stable \
+             without help)",
+            s.simulation_fit,
+            s.prediction_fit,
+            s.unstabilised_prediction_fit
+                .map_or("not available".to_string(), |f| format!("{f:.1} %"))
+        ));
+    }
     let scores: Vec<serde_json::Value> = result
         .order_scores
         .iter()
@@ -177,6 +190,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                     InputMethod::StateEquations => "state_equations",
                 },
                 "order_scores": scores, "warnings": warnings, "out": o.out,
+                "stabilised_fit": stabilised.as_ref().map(|s| serde_json::json!({
+                    "simulation_fit": s.simulation_fit, "prediction_fit": s.prediction_fit,
+                    "unstabilised_prediction_fit": s.unstabilised_prediction_fit,
+                    "destroyed": s.destroyed(),
+                })),
                 "weightings": candidates.iter().map(|c| serde_json::json!({
                     "weighting": c.weighting.name(), "order": c.order,
                     "spectral_radius": c.spectral_radius, "stable": c.usable(),
@@ -201,6 +219,16 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             shown.join(" "),
             o.out.display()
         ));
+        if let Some(s) = &stabilised {
+            crate::say(&format!(
+                "stabilised: simulation fit {:.2} %, one-step prediction fit {:.2} % on the \
+                 data (before stabilising: {})",
+                s.simulation_fit,
+                s.prediction_fit,
+                s.unstabilised_prediction_fit
+                    .map_or("not available".to_string(), |f| format!("{f:.2} %"))
+            ));
+        }
         if !candidates.is_empty() {
             let rows: Vec<String> = candidates
                 .iter()

@@ -164,7 +164,10 @@ fn every_command_of_the_guide_runs() {
         ),
         (
             "tanks-figures/compare",
-            &["y: measured and the models' simulation", "measured"][..],
+            &[
+                "y: measured and the models' simulation",
+                "measured (min-max envelope)",
+            ][..],
         ),
         (
             "heat-figures/compare",

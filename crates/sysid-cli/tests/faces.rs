@@ -513,7 +513,7 @@ fn pmmh_summary_and_warnings_are_the_library_report_of_its_chains() {
 #[test]
 fn n4sid_auto_and_loglik_equal_the_library() {
     use sysid::kalman::KalmanWorkspace;
-    use sysid::subspace::{N4sidOptions, Order, n4sid};
+    use sysid::subspace::{N4sidOptions, Order};
     let path = data("heating_system.csv");
     let dir = scratch_dir();
     let out = dir.join("n4.json");
@@ -538,7 +538,12 @@ fn n4sid_auto_and_loglik_equal_the_library() {
         block_rows: Some(3),
         ..Default::default()
     };
-    let result = n4sid(&record, &options).unwrap();
+    // the command's default weighting is the data's choice
+    let result =
+        sysid::subspace::n4sid_weighted(&record, &options, sysid::subspace::WeightingChoice::Auto)
+            .unwrap()
+            .result;
+    assert_eq!(summary["weighting"], result.weighting.name());
     assert_eq!(summary["order"], result.order);
     let singular: Vec<f64> = summary["singular_values"]
         .as_array()
@@ -770,4 +775,44 @@ fn n4sid_says_when_stabilising_destroyed_the_model_as_the_library_measures_it() 
     ]));
     assert_eq!(auto["stable"], serde_json::json!(true));
     assert_eq!(auto["stabilised"], serde_json::json!(false));
+}
+
+#[test]
+fn predict_of_a_model_file_equals_the_library_s_particle_predictions() {
+    use sysid::modelfile::ModelFile;
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let fitted = examples.join("models/cascaded_tanks_fitted.toml");
+    let (u, y) = tanks_record("cascaded_tanks_val.csv");
+    let series = sysid::smc::Series::new(&y, 1)
+        .unwrap()
+        .with_inputs(&u, 1)
+        .unwrap();
+    let library = ModelFile::read(&fitted)
+        .unwrap()
+        .predict_particles(series, 3, 500, 9)
+        .unwrap();
+    let dir = scratch_dir();
+    let out = dir.join("p.csv");
+    let run = sysid(&[
+        "predict",
+        "--model",
+        s(&fitted),
+        "--data",
+        s(&examples.join("data/cascaded_tanks_val.csv")),
+        "--horizon",
+        "3",
+        "--particles",
+        "500",
+        "--seed",
+        "9",
+        "--out",
+        s(&out),
+    ]);
+    assert_ok(&run);
+    let text = std::fs::read_to_string(&out).unwrap();
+    for (t, line) in text.lines().skip(1).enumerate() {
+        let cells: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        assert_eq!(cells[1], library.mean[t], "mean at row {t}");
+        assert_eq!(cells[2], library.sd[t], "sd at row {t}");
+    }
 }

@@ -70,6 +70,7 @@ mod fit;
 pub mod gaussian;
 pub mod gradient;
 pub mod output_error;
+pub mod prediction;
 pub mod program;
 mod shared;
 pub mod simulation;
@@ -86,6 +87,7 @@ pub use output_error::{
     InitialState, Inseparable, SimulationComparison, SimulationFit, SimulationFitOptions,
     SimulationStart,
 };
+pub use prediction::{ParticlePredictions, PredictionError};
 pub use simulation::{NoiseFree, SimulationError, Simulator};
 pub use smc::ExprSmc;
 pub use spec::{FORMAT, ModelFileError, ModelSpec, Parameter};

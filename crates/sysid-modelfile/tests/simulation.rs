@@ -309,3 +309,74 @@ x = { mean = 2, variance = 0.1 }
         sysid_modelfile::FileFitWarning::Inseparable { names, .. } if names == &["top"]
     )));
 }
+
+#[test]
+fn particle_predictions_of_a_linear_model_file_match_the_kalman_predictor() {
+    use nalgebra::{DMatrix, DVector, dmatrix};
+    let text = r#"
+format = 1
+states = ["x"]
+inputs = ["u"]
+outputs = ["y"]
+[parameters]
+a = { value = 0.8 }
+b = { value = 0.5 }
+[transition]
+x = "a*x + b*u"
+[observation]
+y = "x"
+[noise]
+x = 0.1
+y = 0.2
+[initial]
+x = { mean = 0.3, variance = 1 }
+"#;
+    let file = ModelFile::parse(text, "linear.toml").unwrap();
+    let kalman = sysid_kalman::LinearGaussianModel::builder(
+        dmatrix![0.8],
+        dmatrix![1.0],
+        dmatrix![0.1],
+        dmatrix![0.2],
+    )
+    .b(dmatrix![0.5])
+    .mu(DVector::from_vec(vec![0.3]))
+    .p1(dmatrix![1.0])
+    .build()
+    .unwrap();
+    let steps = 80;
+    let u: Vec<f64> = (0..steps).map(|t| ((t as f64) * 0.3).sin()).collect();
+    let mut rng = sysid_smc::stream(3, 0);
+    let record = kalman
+        .simulate(&DMatrix::from_row_slice(1, steps, &u), &mut rng)
+        .unwrap()
+        .record;
+    let mut y: Vec<f64> = record.y.iter().copied().collect();
+    y[20] = f64::NAN; // a missing output does not weight the cloud
+    let mut with_gap = record.clone();
+    with_gap.y[(0, 20)] = f64::NAN;
+    let series = Series::new(&y, 1).unwrap().with_inputs(&u, 1).unwrap();
+    let particles = 20_000;
+    for horizon in [1, 3] {
+        let exact = kalman.predict(&with_gap, horizon).unwrap();
+        let ours = file
+            .predict_particles(series, horizon, particles, 7)
+            .unwrap();
+        for t in 0..steps {
+            let (m, s) = (exact.mean[(0, t)], exact.sd[(0, t)]);
+            // the cloud's mean has a Monte Carlo error of about s / sqrt(M); 6 of them
+            // (and a resampled filter's extra spread) bound it at every step
+            let bound = 6.0 * s / (particles as f64).sqrt();
+            assert!(
+                (ours.mean[t] - m).abs() <= bound,
+                "k = {horizon}, t = {t}: {} against Kalman's {m} (bound {bound})",
+                ours.mean[t]
+            );
+            assert!(
+                (ours.sd[t] - s).abs() <= 0.03 * s,
+                "k = {horizon}, t = {t}: sd {} against Kalman's {s}",
+                ours.sd[t]
+            );
+        }
+    }
+    assert!(file.predict_particles(series, 0, 10, 1).is_err());
+}

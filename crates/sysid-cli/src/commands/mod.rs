@@ -274,6 +274,16 @@ impl crate::ModelOnData {
     pub fn data_path(&self) -> &Path {
         &self.data.data
     }
+
+    /// The model file's path.
+    pub fn model_path(&self) -> &Path {
+        &self.model
+    }
+
+    /// The data's columns and rows.
+    pub fn data_args(&self) -> &crate::DataArgs {
+        &self.data
+    }
 }
 
 /// Wraps a Kalman error with the data file it concerns.

@@ -17,6 +17,14 @@ pub struct Options {
     /// input up to t). 1 gives the innovations.
     #[arg(long, default_value_t = 1)]
     pub horizon: usize,
+    /// Nonlinear model files (`.toml`): particles of the bootstrap filter whose cloud is
+    /// carried k - 1 steps ahead (the predictions' Monte Carlo error is about sd /
+    /// sqrt(particles)).
+    #[arg(long, default_value_t = 5000)]
+    pub particles: usize,
+    /// Nonlinear model files: the seed of the particle filter.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
     /// Output CSV: t, then per output NAME: NAME_pred, NAME_sd, NAME_error, NAME_std
     /// (the error divided by the standard deviation).
     #[arg(long)]
@@ -37,6 +45,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         });
     }
     crate::files::check_outputs(std::iter::once(o.out.as_path()), o.force)?;
+    if crate::commands::nonlinear::is_model_file(o.source.model_path()) {
+        return run_model_file(o);
+    }
     let (model, file) = o.source.load()?;
     let mut pred = model
         .predict(&file.record, o.horizon)
@@ -94,6 +105,109 @@ pub fn run(o: &Options) -> Result<(), CliError> {
             format!(
                 "{}-step predictions ({}); wrote {}",
                 o.horizon,
+                per_output.join("; "),
+                o.out.display()
+            )
+        },
+    );
+    Ok(())
+}
+
+/// `sysid predict --model m.toml`: the library's particle predictions
+/// ([`sysid::modelfile::ModelFile::predict_particles`]), written in the same layout.
+fn run_model_file(o: &Options) -> Result<(), CliError> {
+    let path = o.source.model_path();
+    let model = crate::commands::nonlinear::read(path)?;
+    let file = o
+        .source
+        .data_args()
+        .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
+    let context = o.source.data_path().display().to_string();
+    let series = crate::commands::particle::series_of(&file, &context)?;
+    let pred = model
+        .predict_particles(series, o.horizon, o.particles, o.seed)
+        .map_err(|e| match e {
+            sysid::modelfile::PredictionError::InvalidOption { name, reason } => {
+                CliError::BadOption {
+                    option: if name == "particles" {
+                        "--particles"
+                    } else {
+                        "--horizon"
+                    },
+                    message: reason,
+                }
+            }
+            other => CliError::BadOption {
+                option: "--model",
+                message: format!("{} on {context}: {other}", path.display()),
+            },
+        })?;
+    let p = series.output_dim();
+    let steps = series.steps();
+    let mut w = create_output(&o.out, o.force)?;
+    let io = |source| CliError::Io {
+        path: o.out.clone(),
+        source,
+    };
+    let mut header = vec!["t".to_string()];
+    for name in &file.output_names {
+        for suffix in ["pred", "sd", "error", "std"] {
+            header.push(format!("{name}_{suffix}"));
+        }
+    }
+    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    let mut sums = vec![(0.0, 0.0, 0.0, 0usize); p];
+    let mut ys: Vec<Vec<f64>> = vec![Vec::new(); p];
+    for t in 0..steps {
+        let mut row = vec![file.label(t)];
+        for (j, sum) in sums.iter_mut().enumerate() {
+            let (m, s) = (pred.mean[t * p + j], pred.sd[t * p + j]);
+            let y = series.output(t)[j];
+            let error = y - m;
+            row.extend([m, s, error, error / s].map(fmt));
+            if !y.is_nan() {
+                sum.0 += error * error;
+                sum.1 += (error / s).powi(2);
+                sum.2 += y;
+                sum.3 += 1;
+                ys[j].push(y);
+            }
+        }
+        writeln!(w, "{}", row.join(",")).map_err(io)?;
+    }
+    w.commit()?;
+    let fit: Vec<f64> = sums
+        .iter()
+        .zip(&ys)
+        .map(|(s, y)| {
+            let mean = s.2 / s.3.max(1) as f64;
+            let spread: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
+            100.0 * (1.0 - (s.0 / spread).sqrt())
+        })
+        .collect();
+    let spread: Vec<f64> = sums
+        .iter()
+        .map(|s| (s.1 / s.3.max(1) as f64).sqrt())
+        .collect();
+    crate::report(
+        o.json,
+        serde_json::json!({
+            "command": "predict", "horizon": o.horizon, "steps": steps,
+            "outputs": file.output_names, "fit_percent": fit, "standardised_rms": spread,
+            "particles": o.particles, "seed": o.seed, "out": o.out, "warnings": [],
+        }),
+        || {
+            let per_output: Vec<String> = file
+                .output_names
+                .iter()
+                .zip(&fit)
+                .zip(&spread)
+                .map(|((name, f), s)| format!("{name}: fit {f:.2} %, standardised rms {s:.3}"))
+                .collect();
+            format!(
+                "{}-step particle predictions ({} particles; {}); wrote {}",
+                o.horizon,
+                o.particles,
                 per_output.join("; "),
                 o.out.display()
             )

@@ -15,10 +15,12 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate_noise_free, m)?)?;
     m.add_function(wrap_pyfunction!(compare_simulation, m)?)?;
     m.add_function(wrap_pyfunction!(fit_simulation, m)?)?;
+    m.add_function(wrap_pyfunction!(predict_particles, m)?)?;
     Ok(())
 }
 
-/// `(states, outputs)` of a simulation, `T x n` and `T x p`.
+/// Two time-major arrays: `(states, outputs)` of a simulation (`T x n`, `T x p`), or
+/// `(mean, sd)` of predictions.
 type StatesAndOutputs<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
 
 /// A time-major `rows x cols` vector as a 2-D array.
@@ -174,4 +176,36 @@ fn fit_simulation<'py>(
     ];
     out.set_item("text", fit.fitted.to_toml(&metadata))?;
     crate::run::result_or_stop(py, run.stopped_by, out)
+}
+
+/// `sysid predict --model`: the k-step particle predictions, `(mean, sd)` as `T x p`
+/// arrays.
+#[pyfunction]
+#[pyo3(signature = (model, y, u=None, horizon=1, particles=5000, seed=1))]
+fn predict_particles<'py>(
+    py: Python<'py>,
+    model: &CompiledModel,
+    y: PyReadonlyArray2<'_, f64>,
+    u: Option<PyReadonlyArray2<'_, f64>>,
+    horizon: usize,
+    particles: usize,
+    seed: u64,
+) -> PyResult<StatesAndOutputs<'py>> {
+    let data = record(&y, u.as_ref())?;
+    model.check(&data)?;
+    let series = series_of(&data)?;
+    let pred = py
+        .detach(|| {
+            model
+                .file
+                .predict_particles(series, horizon, particles, seed)
+        })
+        .map_err(|e| match e {
+            sysid::modelfile::PredictionError::InvalidOption { name, reason } => {
+                Failure::option(name, reason)
+            }
+            other => Failure::sysid(other),
+        })?;
+    let p = series.output_dim();
+    Ok((matrix(py, &pred.mean, p)?, matrix(py, &pred.sd, p)?))
 }

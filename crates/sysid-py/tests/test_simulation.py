@@ -60,3 +60,18 @@ def test_simulation_error_fit_equals_the_command(tmp_path):
     with pytest.raises(sysid.OptionError) as e:
         sysid.fit(TANKS, est[["u", "y"]], criterion="prediction")
     assert e.value.option == "criterion"
+
+
+def test_predict_equals_the_command(tmp_path):
+    model = sysid.ModelFile(FITTED)
+    val = pd.read_csv(VAL)
+    mean, sd = model.predict(val[["u", "y"]], horizon=3, particles=500, seed=9)
+    out = tmp_path / "p.csv"
+    cli("predict", "--model", FITTED, "--data", VAL, "--horizon", 3, "--particles", 500,
+        "--seed", 9, "--out", out)
+    theirs = pd.read_csv(out)
+    assert np.array_equal(mean[:, 0], theirs["y_pred"].to_numpy())
+    assert np.array_equal(sd[:, 0], theirs["y_sd"].to_numpy())
+    with pytest.raises(sysid.OptionError) as e:
+        model.predict(val[["u", "y"]], horizon=0)
+    assert e.value.option == "horizon"

@@ -87,6 +87,14 @@ class ModelFile:
         x0 = None if x0 is None else [float(v) for v in x0]
         return _sysid.simulate_noise_free(self._compiled, np.ascontiguousarray(u), steps, x0)
 
+    def predict(self, data, u=None, *, horizon=1, particles=5000, seed=1, time=None):
+        """``sysid predict --model``: the ``horizon``-step-ahead predictions of a record's
+        outputs by a bootstrap particle filter (``y_t`` given the outputs up to
+        ``t - horizon``). Returns ``(mean, sd)``, arrays ``(T, p)``; ``sd`` includes the
+        measurement noise. Their Monte Carlo error is about ``sd / sqrt(particles)``."""
+        s = self._signals(data, u, time)
+        return _sysid.predict_particles(self._compiled, s.y, s.u, horizon, particles, seed)
+
     def compare(self, data, u=None, *, initial_samples=None, x0=None, burn_in=0, time=None):
         """``sysid compare --model``: the noise-free simulation of a record's inputs,
         scored against its outputs (RMS and MATLAB's fit per output), from the initial

@@ -816,3 +816,36 @@ fn predict_of_a_model_file_equals_the_library_s_particle_predictions() {
         assert_eq!(cells[2], library.sd[t], "sd at row {t}");
     }
 }
+
+#[test]
+fn resid_of_a_model_file_equals_the_library() {
+    use sysid::modelfile::ModelFile;
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let fitted = examples.join("models/cascaded_tanks_fitted.toml");
+    let (u, y) = tanks_record("cascaded_tanks_val.csv");
+    let series = sysid::smc::Series::new(&y, 1)
+        .unwrap()
+        .with_inputs(&u, 1)
+        .unwrap();
+    let library = ModelFile::read(&fitted)
+        .unwrap()
+        .residual_tests(series, 10, 500, 3)
+        .unwrap();
+    let summary = json_of(&sysid(&[
+        "resid",
+        "--model",
+        s(&fitted),
+        "--data",
+        s(&examples.join("data/cascaded_tanks_val.csv")),
+        "--lags",
+        "10",
+        "--particles",
+        "500",
+        "--seed",
+        "3",
+        "--json",
+    ]));
+    let text = summary.to_string();
+    let q = library.outputs[0].ljung_box.statistic;
+    assert!(text.contains(&format!("{q}")), "Q = {q} not in {text}");
+}

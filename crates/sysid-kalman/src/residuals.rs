@@ -2,6 +2,7 @@
 //! Ljung-Box portmanteau statistic.
 
 use crate::{KalmanError, LinearGaussianModel, Predictions, Record, Result};
+use nalgebra::DMatrix;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// The sample autocorrelation `r_k`, `k = 0..=max_lag`, of `x` with its mean removed:
@@ -169,26 +170,51 @@ impl ResidualTests {
                 cols: t_len,
             });
         }
+        let mut standardised = predictions.standardised.clone();
+        for (z, sd) in standardised.iter_mut().zip(predictions.sd.iter()) {
+            if !sd.is_finite() {
+                *z = f64::NAN;
+            }
+        }
+        ResidualTests::of_standardised(&standardised, &record.u, lags)
+    }
+
+    /// The tests of standardised one-step prediction errors (`p x T`; a non-finite
+    /// entry is a step without a usable error) against the inputs (`m x T`), over
+    /// `lags` lags: for predictors other than the Kalman filter (a particle filter's).
+    ///
+    /// # Errors
+    /// [`KalmanError::TooManyLags`] when `lags` is 0 or not below an output's usable
+    /// errors; [`KalmanError::Dimension`] when the inputs have another length.
+    pub fn of_standardised(
+        standardised: &DMatrix<f64>,
+        inputs: &DMatrix<f64>,
+        lags: usize,
+    ) -> Result<Self> {
+        let (p, t_len) = standardised.shape();
+        if inputs.ncols() != t_len {
+            return Err(KalmanError::Dimension {
+                name: "inputs".into(),
+                expected_rows: inputs.nrows(),
+                expected_cols: t_len,
+                rows: inputs.nrows(),
+                cols: inputs.ncols(),
+            });
+        }
         let mut outputs = Vec::with_capacity(p);
         for i in 0..p {
             let steps: Vec<usize> = (0..t_len)
-                .filter(|&t| {
-                    predictions.standardised[(i, t)].is_finite()
-                        && predictions.sd[(i, t)].is_finite()
-                })
+                .filter(|&t| standardised[(i, t)].is_finite())
                 .collect();
-            let e: Vec<f64> = steps
-                .iter()
-                .map(|&t| predictions.standardised[(i, t)])
-                .collect();
+            let e: Vec<f64> = steps.iter().map(|&t| standardised[(i, t)]).collect();
             let ljung_box = ljung_box(&e, lags, 0).ok_or(KalmanError::TooManyLags {
                 lags,
                 usable: e.len(),
                 output: i + 1,
             })?;
-            let ccf = (0..record.u.nrows())
+            let ccf = (0..inputs.nrows())
                 .map(|j| {
-                    let u: Vec<f64> = steps.iter().map(|&t| record.u[(j, t)]).collect();
+                    let u: Vec<f64> = steps.iter().map(|&t| inputs[(j, t)]).collect();
                     cross_correlation(&e, &u, lags)
                 })
                 .collect();

@@ -183,3 +183,34 @@ impl ModelFile {
         Ok(ParticlePredictions { horizon, mean, sd })
     }
 }
+
+impl ModelFile {
+    /// The residual tests of the one-step particle predictions of `data` (MATLAB's
+    /// `resid` for a nonlinear model): per output, the autocorrelation of the
+    /// standardised errors, their cross-correlation with each input and the Ljung-Box
+    /// test ([`sysid_kalman::residuals::ResidualTests::of_standardised`]). The particle
+    /// predictions' Monte Carlo error adds a little noise to the errors (about
+    /// `1 / sqrt(particles)` of their spread).
+    ///
+    /// # Errors
+    /// Those of [`ModelFile::predict_particles`]; too many lags for the record.
+    pub fn residual_tests(
+        &self,
+        data: Series<'_>,
+        lags: usize,
+        particles: usize,
+        seed: u64,
+    ) -> Result<sysid_kalman::residuals::ResidualTests, PredictionError> {
+        let pred = self.predict_particles(data, 1, particles, seed)?;
+        let (p, m, steps) = (data.output_dim(), data.input_dim(), data.steps());
+        let standardised = nalgebra::DMatrix::from_fn(p, steps, |j, t| {
+            (data.output(t)[j] - pred.mean[t * p + j]) / pred.sd[t * p + j]
+        });
+        let inputs = nalgebra::DMatrix::from_fn(m, steps, |j, t| data.input(t)[j]);
+        sysid_kalman::residuals::ResidualTests::of_standardised(&standardised, &inputs, lags)
+            .map_err(|e| PredictionError::InvalidOption {
+                name: "lags",
+                reason: e.to_string(),
+            })
+    }
+}

@@ -379,4 +379,17 @@ x = { mean = 0.3, variance = 1 }
         }
     }
     assert!(file.predict_particles(series, 0, 10, 1).is_err());
+
+    // the residual tests of the particle predictions are the Kalman innovations' (the
+    // standardised errors differ by the particle error, about 1/sqrt(M) of their size)
+    let ours = file.residual_tests(series, 10, particles, 7).unwrap();
+    let exact = kalman.residual_tests(&with_gap, 10).unwrap();
+    assert_eq!(ours.outputs[0].samples, exact.outputs[0].samples);
+    for (a, b) in ours.outputs[0].acf.iter().zip(&exact.outputs[0].acf) {
+        assert!((a - b).abs() < 0.01, "acf {a} against Kalman's {b}");
+    }
+    for (a, b) in ours.outputs[0].ccf[0].iter().zip(&exact.outputs[0].ccf[0]) {
+        assert!((a - b).abs() < 0.01, "ccf {a} against Kalman's {b}");
+    }
+    assert!(file.residual_tests(series, 500, 100, 1).is_err());
 }

@@ -18,6 +18,13 @@ pub struct Options {
     /// Lags of the correlations and of the Ljung-Box test.
     #[arg(long, default_value_t = 20)]
     pub lags: usize,
+    /// Nonlinear model files (`.toml`): particles of the bootstrap filter whose one-step
+    /// predictions are tested.
+    #[arg(long, default_value_t = 5000)]
+    pub particles: usize,
+    /// Nonlinear model files: the seed of the particle filter.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
     /// Also write the correlations as CSV: lag, then per output NAME: NAME_acf, and per
     /// output and input: NAME_INPUT_ccf (lags -L..L; the autocorrelation is empty at
     /// negative lags).
@@ -48,23 +55,11 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .chain(figures.iter().flatten().map(|p| p.as_path()))
         .collect();
     crate::files::refuse_existing(targets, o.force)?;
-    let (model, file) = o.source.load()?;
-    let tests = model
-        .residual_tests(&file.record, o.lags)
-        .map_err(|e| match e {
-            KalmanError::TooManyLags {
-                lags,
-                usable,
-                output,
-            } => CliError::BadOption {
-                option: "--lags",
-                message: format!(
-                    "{lags} must be at least 1 and below the {usable} usable residuals of {}",
-                    file.output_names[output - 1]
-                ),
-            },
-            e => in_data(o.source.data_path())(e),
-        })?;
+    let (tests, file) = if crate::commands::nonlinear::is_model_file(o.source.model_path()) {
+        model_file_tests(o)?
+    } else {
+        linear_tests(o)?
+    };
     let names = Names {
         outputs: &file.output_names,
         inputs: &file.input_names,
@@ -223,4 +218,58 @@ fn figure(tests: &ResidualTests, names: &Names) -> Figure {
     }
     let columns = panels.len().min(2);
     Figure::grid(panels, columns)
+}
+
+/// The tests of a linear model's Kalman innovations.
+fn linear_tests(o: &Options) -> Result<(ResidualTests, crate::files::DataFile), CliError> {
+    let (model, file) = o.source.load()?;
+    let tests = model
+        .residual_tests(&file.record, o.lags)
+        .map_err(|e| match e {
+            KalmanError::TooManyLags {
+                lags,
+                usable,
+                output,
+            } => CliError::BadOption {
+                option: "--lags",
+                message: format!(
+                    "{lags} must be at least 1 and below the {usable} usable residuals of {}",
+                    file.output_names[output - 1]
+                ),
+            },
+            e => in_data(o.source.data_path())(e),
+        })?;
+    Ok((tests, file))
+}
+
+/// The tests of a model file's one-step particle predictions
+/// ([`sysid::modelfile::ModelFile::residual_tests`]).
+fn model_file_tests(o: &Options) -> Result<(ResidualTests, crate::files::DataFile), CliError> {
+    let path = o.source.model_path();
+    let model = crate::commands::nonlinear::read(path)?;
+    let file = o
+        .source
+        .data_args()
+        .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
+    let context = o.source.data_path().display().to_string();
+    let series = crate::commands::particle::series_of(&file, &context)?;
+    let tests = model
+        .residual_tests(series, o.lags, o.particles, o.seed)
+        .map_err(|e| match e {
+            sysid::modelfile::PredictionError::InvalidOption { name, reason } => {
+                CliError::BadOption {
+                    option: match name {
+                        "lags" => "--lags",
+                        "particles" => "--particles",
+                        _ => "--model",
+                    },
+                    message: reason,
+                }
+            }
+            other => CliError::BadOption {
+                option: "--model",
+                message: format!("{} on {context}: {other}", path.display()),
+            },
+        })?;
+    Ok((tests, file))
 }

@@ -280,9 +280,13 @@ impl crate::ModelOnData {
         &self.model
     }
 
-    /// The data's columns and rows.
-    pub fn data_args(&self) -> &crate::DataArgs {
-        &self.data
+    /// A nonlinear model file (`.toml`) and the record read by its column names.
+    pub fn load_model_file(&self) -> Result<(sysid::modelfile::ModelFile, DataFile), CliError> {
+        let model = nonlinear::read(&self.model)?;
+        let file = self
+            .data
+            .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
+        Ok((model, file))
     }
 }
 

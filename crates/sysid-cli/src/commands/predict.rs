@@ -117,11 +117,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
 /// ([`sysid::modelfile::ModelFile::predict_particles`]), written in the same layout.
 fn run_model_file(o: &Options) -> Result<(), CliError> {
     let path = o.source.model_path();
-    let model = crate::commands::nonlinear::read(path)?;
-    let file = o
-        .source
-        .data_args()
-        .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
+    let (model, file) = o.source.load_model_file()?;
     let context = o.source.data_path().display().to_string();
     let series = crate::commands::particle::series_of(&file, &context)?;
     let pred = model

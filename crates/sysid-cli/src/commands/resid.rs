@@ -246,11 +246,7 @@ fn linear_tests(o: &Options) -> Result<(ResidualTests, crate::files::DataFile), 
 /// ([`sysid::modelfile::ModelFile::residual_tests`]).
 fn model_file_tests(o: &Options) -> Result<(ResidualTests, crate::files::DataFile), CliError> {
     let path = o.source.model_path();
-    let model = crate::commands::nonlinear::read(path)?;
-    let file = o
-        .source
-        .data_args()
-        .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
+    let (model, file) = o.source.load_model_file()?;
     let context = o.source.data_path().display().to_string();
     let series = crate::commands::particle::series_of(&file, &context)?;
     let tests = model

@@ -290,23 +290,22 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 }
 
-/// `100 (1 - |y - yhat| / |y - mean(y)|)` and the RMS per output over the observed
-/// values from step `from`.
+/// MATLAB's fit ([`sysid_kalman::fit_percent`]) and the RMS per output over the
+/// observed values from step `from`.
 fn scores(data: &Series<'_>, outputs: &[f64], from: usize) -> (Vec<f64>, Vec<f64>) {
-    let p = data.output_dim();
-    (0..p)
+    let (p, steps) = (data.output_dim(), data.steps());
+    let y = nalgebra::DMatrix::from_fn(p, steps, |j, t| data.output(t)[j]);
+    let y_hat = nalgebra::DMatrix::from_fn(p, steps, |j, t| outputs[t * p + j]);
+    let rms = (0..p)
         .map(|j| {
-            let pairs: Vec<(f64, f64)> = (from..data.steps())
-                .map(|t| (data.output(t)[j], outputs[t * p + j]))
-                .filter(|(y, _)| !y.is_nan())
+            let errors: Vec<f64> = (from..steps)
+                .filter(|&t| !y[(j, t)].is_nan())
+                .map(|t| (y[(j, t)] - y_hat[(j, t)]).powi(2))
                 .collect();
-            let n = pairs.len().max(1) as f64;
-            let mean = pairs.iter().map(|(y, _)| y).sum::<f64>() / n;
-            let err: f64 = pairs.iter().map(|(y, s)| (y - s).powi(2)).sum();
-            let spread: f64 = pairs.iter().map(|(y, _)| (y - mean).powi(2)).sum();
-            (100.0 * (1.0 - (err / spread).sqrt()), (err / n).sqrt())
+            (errors.iter().sum::<f64>() / errors.len().max(1) as f64).sqrt()
         })
-        .unzip()
+        .collect();
+    (sysid_kalman::fit_percent(&y, &y_hat, from), rms)
 }
 
 impl ModelFile {

@@ -59,13 +59,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         path: o.out.clone(),
         source,
     };
-    let mut header = vec!["t".to_string()];
-    for name in &file.output_names {
-        for suffix in ["pred", "sd", "error", "std"] {
-            header.push(format!("{name}_{suffix}"));
-        }
-    }
-    writeln!(w, "{}", header.join(",")).map_err(io)?;
+    writeln!(w, "{}", header(&file.output_names)).map_err(io)?;
     for t in 0..file.record.len() {
         let mut row = vec![file.label(t)];
         for i in 0..model.p() {
@@ -145,45 +139,27 @@ fn run_model_file(o: &Options) -> Result<(), CliError> {
         path: o.out.clone(),
         source,
     };
-    let mut header = vec!["t".to_string()];
-    for name in &file.output_names {
-        for suffix in ["pred", "sd", "error", "std"] {
-            header.push(format!("{name}_{suffix}"));
-        }
-    }
-    writeln!(w, "{}", header.join(",")).map_err(io)?;
-    let mut sums = vec![(0.0, 0.0, 0.0, 0usize); p];
-    let mut ys: Vec<Vec<f64>> = vec![Vec::new(); p];
+    writeln!(w, "{}", header(&file.output_names)).map_err(io)?;
+    let mut squared = vec![(0.0, 0usize); p];
     for t in 0..steps {
         let mut row = vec![file.label(t)];
-        for (j, sum) in sums.iter_mut().enumerate() {
+        for (j, sum) in squared.iter_mut().enumerate() {
             let (m, s) = (pred.mean[t * p + j], pred.sd[t * p + j]);
-            let y = series.output(t)[j];
-            let error = y - m;
+            let error = series.output(t)[j] - m;
             row.extend([m, s, error, error / s].map(fmt));
-            if !y.is_nan() {
-                sum.0 += error * error;
-                sum.1 += (error / s).powi(2);
-                sum.2 += y;
-                sum.3 += 1;
-                ys[j].push(y);
+            if !error.is_nan() {
+                sum.0 += (error / s).powi(2);
+                sum.1 += 1;
             }
         }
         writeln!(w, "{}", row.join(",")).map_err(io)?;
     }
     w.commit()?;
-    let fit: Vec<f64> = sums
+    let mean = nalgebra::DMatrix::from_fn(p, steps, |j, t| pred.mean[t * p + j]);
+    let fit = fit_percent(&file.measured(), &mean, 0);
+    let spread: Vec<f64> = squared
         .iter()
-        .zip(&ys)
-        .map(|(s, y)| {
-            let mean = s.2 / s.3.max(1) as f64;
-            let spread: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-            100.0 * (1.0 - (s.0 / spread).sqrt())
-        })
-        .collect();
-    let spread: Vec<f64> = sums
-        .iter()
-        .map(|s| (s.1 / s.3.max(1) as f64).sqrt())
+        .map(|(sum, n)| (sum / (*n).max(1) as f64).sqrt())
         .collect();
     crate::report(
         o.json,
@@ -210,4 +186,15 @@ fn run_model_file(o: &Options) -> Result<(), CliError> {
         },
     );
     Ok(())
+}
+
+/// The CSV header: t, then per output NAME_pred, NAME_sd, NAME_error, NAME_std.
+fn header(outputs: &[String]) -> String {
+    let mut header = vec!["t".to_string()];
+    for name in outputs {
+        for suffix in ["pred", "sd", "error", "std"] {
+            header.push(format!("{name}_{suffix}"));
+        }
+    }
+    header.join(",")
 }

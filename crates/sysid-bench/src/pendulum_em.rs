@@ -110,6 +110,8 @@ fn run_one(a: &Args, run: usize) -> Result<(serde_json::Value, bool, bool), Stri
                 &Tanizaki::default(),
                 &RobustOptions {
                     max_escalations: a.max_escalations,
+                    // the study as measured (docs/particle-em.md), before the polish
+                    polish_particles: 0,
                     ..RobustOptions::default()
                 },
                 run_seed(2),

@@ -111,9 +111,9 @@ pub(crate) struct StatesArgs {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// The whole pipeline on the papers' systems (N4SID then EM on the seed-004 system,
-    /// the seed-000 particle-EM study), a table and figures; under a minute on 2 cores.
+    /// the seed-000 particle-EM study), a table and figures; about 12 s on 2 cores.
     #[command(
-        after_help = "Examples:\n  sysid demo\n  sysid demo --out-dir /tmp/figures --force\n  sysid demo --full          # the paper's scale: 200 runs x 1000 iterations (about 25 min on 2 cores)"
+        after_help = "Examples:\n  sysid demo\n  sysid demo --out-dir /tmp/figures --force\n  sysid demo --full          # the paper's scale: 200 runs x 1000 iterations on T = 1000 (about 70 min on 2 cores)"
     )]
     Demo(commands::demo::Options),
     /// Simulate a canonical system and write its data as CSV (t, u1.., y1.., [x1..]), or

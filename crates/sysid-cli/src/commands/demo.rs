@@ -2,8 +2,10 @@
 //!
 //! 1. Seed 004: the 2x2 system of McMillan degree 8, T = 200. N4SID (order 8), then
 //!    exact EM from the N4SID model and from the paper's initial model.
-//! 2. Seed 000: the particle-EM study on `nlbench` (T = 1000, M = 50, Tanizaki) at a
-//!    reduced scale (16 runs x 200 iterations; `--full`: the paper's 200 x 1000).
+//! 2. Seed 000: the particle-EM study on `nlbench` (M = 50, Tanizaki) at a reduced
+//!    scale (2 runs x 200 iterations on T = 500, so that the demo takes under 20 s on two
+//!    cores; `--full`: the paper's 200 x 1000 on T = 1000), the paper's EM against the
+//!    robust default from the same data and starts.
 //! 3. The smoothed state of one `nlbench` data set at its EM estimate, with a 95 %
 //!    band, against the true state.
 //!
@@ -32,6 +34,20 @@ use sysid_plot::{Band, Figure, Panel, Series as Curve, Stroke};
 /// The most particle-EM runs the demo takes (the paper's study has 200).
 const MAX_RUNS: usize = 1000;
 
+/// Particle-EM runs of the default demo: each robust run costs about 15 CPU-seconds
+/// at T = 500 (its exploration, refinement and 10 000-particle polish), and the demo
+/// is to finish within 20 s on two cores.
+const DEMO_RUNS: usize = 2;
+
+/// Data length of the default demo's runs (the paper's is 1000, `--full`).
+const DEMO_STEPS: usize = 500;
+
+/// The shortest data set the demo takes (shorter ones identify little).
+const MIN_STEPS: usize = 50;
+
+/// The longest (a million steps of 10 000 particles is already many minutes).
+const MAX_STEPS: usize = 1_000_000;
+
 /// The most EM iterations per run the demo takes (the paper's 1000).
 const MAX_ITERATIONS: usize = 100_000;
 
@@ -49,12 +65,16 @@ pub struct Options {
     /// The paper's scale for the particle-EM study: 200 runs x 1000 iterations.
     #[arg(long)]
     pub full: bool,
-    /// Particle-EM runs (default 16, or 200 with --full).
+    /// Particle-EM runs (default 2, or 200 with --full).
     #[arg(long)]
     pub runs: Option<usize>,
     /// EM iterations per particle-EM run (default 200, or 1000 with --full).
     #[arg(long)]
     pub iters: Option<usize>,
+    /// Length T of each particle-EM run's data set (default 500, or the paper's 1000
+    /// with --full).
+    #[arg(long)]
+    pub steps: Option<usize>,
     /// Seed of the data sets, starts and particle streams.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -71,6 +91,7 @@ impl Default for Options {
             full: false,
             runs: None,
             iters: None,
+            steps: None,
             seed: 1,
             json: false,
         }
@@ -478,8 +499,15 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .flat_map(|stem| ["svg", "png"].map(|ext| dir.join(format!("{stem}.{ext}"))))
         .collect();
     crate::files::refuse_existing(paths.iter().map(PathBuf::as_path), overwrite)?;
-    let runs = o.runs.unwrap_or(if o.full { 200 } else { 16 });
+    let runs = o.runs.unwrap_or(if o.full { 200 } else { DEMO_RUNS });
+    let steps = o.steps.unwrap_or(if o.full { 1000 } else { DEMO_STEPS });
     let iterations = o.iters.unwrap_or(if o.full { 1000 } else { 200 });
+    if !(MIN_STEPS..=MAX_STEPS).contains(&steps) {
+        return Err(CliError::BadOption {
+            option: "--steps",
+            message: format!("{steps}: give {MIN_STEPS} to {MAX_STEPS} steps"),
+        });
+    }
     if runs == 0 || iterations == 0 {
         return Err(CliError::BadOption {
             option: "--runs/--iters",
@@ -507,6 +535,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let study = NlbenchStudy {
         seed: o.seed,
         iterations,
+        steps,
         method: Method::Paper,
         ..NlbenchStudy::default()
     };
@@ -520,6 +549,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         method: Method::Robust(RobustOptions {
             refine_iterations: iterations.min(RobustOptions::default().refine_iterations),
             explore_iterations: iterations.min(RobustOptions::default().explore_iterations),
+            polish_evaluations: iterations.min(RobustOptions::default().polish_evaluations),
             ..RobustOptions::default()
         }),
         ..study
@@ -544,6 +574,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         &linear,
         &[(&results, particle_seconds), (&robust, robust_seconds)],
         &Timings {
+            steps,
             linear_seconds,
             total,
         },
@@ -553,6 +584,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
 }
 
 struct Timings {
+    /// Data length of the particle-EM runs (shown with the times).
+    steps: usize,
     linear_seconds: f64,
     total: f64,
 }
@@ -600,7 +633,10 @@ fn report(
         summarise("robust", robust, *robust_seconds),
     ];
     let iterations = paper.first().map_or(0, |r| r.trajectory.len());
-    let study = NlbenchStudy::default();
+    let study = NlbenchStudy {
+        steps: t.steps,
+        ..NlbenchStudy::default()
+    };
     let takeaway = format!(
         "take away: fit with the default `sysid fit nlbench` (robust): {}/{} runs within 10 % \
          of the truth, against {}/{} for one run of the paper's EM from the same starts",
@@ -702,13 +738,13 @@ fn report(
     }
     out.push(format!(
         "  (medians of the estimates; paper: q and r estimated from 10 times the truth, \
-         {iterations} iterations; robust: 8 starts, the best refined, docs/particle-em.md; \
+         {iterations} iterations; robust: 8 starts, the best refined and polished by a 10 000-particle likelihood, docs/particle-em.md; \
          {} threads)",
         crate::threads()
     ));
     if !o.full {
         out.push(
-            "  (reduced scale; `sysid demo --full` runs the paper's 200 runs x 1000 iterations)"
+            "  (reduced scale; `sysid demo --full` runs the paper's 200 runs x 1000 iterations on T = 1000)"
                 .into(),
         );
     }

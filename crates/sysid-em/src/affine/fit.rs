@@ -66,6 +66,10 @@ pub struct AffineFitOptions {
     pub iterations: usize,
     /// Starts the robust driver explores. Default [`RobustOptions::default`]'s.
     pub starts: usize,
+    /// Particles of the robust driver's polish (its estimate's likelihood maximised
+    /// directly; [`RobustOptions::polish_particles`]); 0 skips it. Default
+    /// [`RobustOptions::default`]'s (10 000).
+    pub polish_particles: usize,
 }
 
 impl Default for AffineFitOptions {
@@ -77,6 +81,7 @@ impl Default for AffineFitOptions {
             smoother: PathSmoother::for_em("tanizaki", 100).expect("a known smoother"),
             iterations: 100,
             starts: RobustOptions::default().starts,
+            polish_particles: RobustOptions::default().polish_particles,
         }
     }
 }
@@ -114,8 +119,15 @@ impl AffineFitOptions {
             refine_iterations: self.iterations,
             refine_particles: self.particles.max(2),
             explore_particles: (self.particles / 2).max(2),
+            polish_particles: self.polish_particles,
             ..RobustOptions::default()
         };
+        if self.polish_particles == 1 {
+            return Err(bad(
+                "polish_particles",
+                "must be 0 (no polish) or at least 2".into(),
+            ));
+        }
         robust.check()?;
         Ok(CheckedAffineFitOptions {
             options: self,

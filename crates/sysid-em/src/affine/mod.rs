@@ -29,6 +29,7 @@ mod fit;
 mod model;
 mod moments;
 mod mstep;
+mod polish;
 mod psaem;
 mod robust;
 mod stats;
@@ -38,6 +39,7 @@ pub use fit::{
 };
 pub use model::{AffineModel, AffineParams, free_structure};
 pub use mstep::m_step;
+pub use polish::Polish;
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{
     LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome, StartStatus,

@@ -52,6 +52,7 @@
 //! # References
 //! Schön, Wills and Ninness (2006) (the EM); Polyak and Juditsky (1992) (averaging).
 
+use super::polish::{Polish, polish};
 use super::{AffineEm, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure};
 use crate::EmAlgorithm;
 use crate::FitRun;
@@ -105,6 +106,13 @@ pub struct RobustOptions {
     /// measured default. Turn it on when starts fail with degenerate weights or a
     /// singular noise estimate.
     pub max_escalations: usize,
+    /// Particles of the filter whose log-likelihood, on common random numbers, is
+    /// maximised directly from the refined estimate (the polish, `polish.rs`); 0 skips
+    /// the polish. Default 10 000: on seed 000's benchmark a 1000-particle filter at the
+    /// truth loses the state in 2 runs of 9, a 10 000-particle one has sd 0.6.
+    pub polish_particles: usize,
+    /// Evaluations (filters) the polish's Nelder–Mead may spend. Default 300.
+    pub polish_evaluations: usize,
     /// Run the starts in parallel. Default true.
     pub parallel: bool,
 }
@@ -125,6 +133,8 @@ impl Default for RobustOptions {
             refine_particles: 100,
             escalation: 10.0,
             max_escalations: 0,
+            polish_particles: 10_000,
+            polish_evaluations: 300,
             parallel: true,
         }
     }
@@ -140,8 +150,12 @@ impl RobustOptions {
         if self.starts == 0 || self.explore_iterations == 0 || self.refine_iterations == 0 {
             return bad("starts, explore_iterations and refine_iterations must be at least 1");
         }
-        if self.explore_particles < 2 || self.refine_particles < 2 || self.select_particles < 2 {
-            return bad("every particle count must be at least 2");
+        if self.explore_particles < 2
+            || self.refine_particles < 2
+            || self.select_particles < 2
+            || self.polish_particles == 1
+        {
+            return bad("every particle count must be at least 2 (the polish's: 0 skips it)");
         }
         if !(0.0..1.0).contains(&self.spread) {
             return bad("spread must be in [0, 1)");
@@ -216,6 +230,8 @@ pub struct RobustTiming {
     pub select: Duration,
     /// The refinement.
     pub refine: Duration,
+    /// The polish.
+    pub polish: Duration,
 }
 
 /// How the refinement ended: it always runs its iterations (a noisy E-step has no
@@ -240,10 +256,16 @@ pub enum RefineStop {
 /// The result of [`fit_robust`].
 #[derive(Debug, Clone)]
 pub struct RobustFit {
-    /// The refined, averaged estimate.
+    /// The estimate: the refined, averaged one, polished when
+    /// [`RobustOptions::polish_particles`] is not 0.
     pub estimate: AffineParams,
-    /// Its log-likelihood by the large filter.
+    /// Its log-likelihood: by the polish's filter (the mean of independent runs) when it
+    /// ran, else by the selection filter.
     pub loglik: f64,
+    /// Particles of the filter behind [`RobustFit::loglik`].
+    pub loglik_particles: usize,
+    /// What the polish did (`None` when it was off or the run was interrupted first).
+    pub polish: Option<Polish>,
     /// Whether the refinement's iterates had settled.
     pub stop: RefineStop,
     /// The estimate the refinement started from, and its log-likelihood.
@@ -565,8 +587,8 @@ where
     } else {
         average(&trace[trace.len() / 2..])
     };
-    let stop = refine_stop(model, &trace);
-    if let RefineStop::StillMoving { change } = stop
+    let settled = refine_stop(model, &trace);
+    if let RefineStop::StillMoving { change } = settled
         && !interrupted
     {
         warnings.push(format!(
@@ -605,10 +627,34 @@ where
         }
         _ => (estimate, loglik),
     };
+    let (estimate, loglik, loglik_particles, polish) = if options.polish_particles == 0 || stop() {
+        (estimate, loglik, options.select_particles, None)
+    } else {
+        let began = Instant::now();
+        let (polished, report) = polished(
+            model,
+            data,
+            &estimate,
+            spec,
+            options,
+            stream(seed, u64::MAX - 1).random(),
+            stop,
+            &mut warnings,
+        )?;
+        timing.polish = began.elapsed();
+        if report.loglik > report.start_loglik {
+            (polished, report.loglik, report.particles, Some(report))
+        } else {
+            let l = report.start_loglik;
+            (estimate, l, report.particles, Some(report))
+        }
+    };
     Ok(RobustFit {
         estimate,
         loglik,
-        stop,
+        loglik_particles,
+        polish,
+        stop: settled,
         selected: best,
         starts: outcomes,
         maxima,
@@ -619,6 +665,60 @@ where
         interrupted,
     })
 }
+
+/// Runs the polish and adds its warnings: a budget spent before the simplex converged,
+/// a filter too noisy to compare points.
+#[allow(clippy::too_many_arguments)]
+fn polished<A: AffineModel>(
+    model: &A,
+    data: Series<'_>,
+    estimate: &AffineParams,
+    spec: &AffineEmSpec,
+    options: &RobustOptions,
+    seed: u64,
+    stop: &dyn Fn() -> bool,
+    warnings: &mut Vec<String>,
+) -> Result<(AffineParams, Polish), AffineEmError> {
+    let (polished, report) = polish(
+        model,
+        data,
+        estimate,
+        spec,
+        options.polish_particles,
+        options.polish_evaluations,
+        seed,
+        stop,
+    )?;
+    if report.interrupted {
+        warnings.push(format!(
+            "interrupted during the polish after {} filters: the best point so far is \
+             returned",
+            report.evaluations
+        ));
+    } else if !report.converged && report.loglik - report.start_loglik > 1.0 {
+        warnings.push(format!(
+            "the direct maximisation of the {}-particle log-likelihood spent its {} \
+             evaluations before converging (it had gained {:.1} nats over the EM \
+             estimate): the estimate may still be below the maximum; raise the polish's \
+             evaluations",
+            report.particles,
+            options.polish_evaluations,
+            report.loglik - report.start_loglik
+        ));
+    }
+    if report.loglik_sd > LOGLIK_SD_LIMIT {
+        warnings.push(format!(
+            "the {}-particle filter that scores the estimate has a Monte Carlo sd of {:.2} \
+             nats (over {LOGLIK_SD_LIMIT}): it cannot rank nearby points, so the polish may \
+             have stopped early or moved by noise; raise the polish's particles",
+            report.particles, report.loglik_sd
+        ));
+    }
+    Ok((polished, report))
+}
+
+/// The log-likelihood sd (nats) above which the polish's filter is called too noisy.
+const LOGLIK_SD_LIMIT: f64 = 1.0;
 
 /// The log-likelihood of the outputs as independent Gaussian noise around each
 /// channel's mean (every observed entry): what a model that explains nothing scores.

@@ -241,7 +241,7 @@ class SimulationFitResults:
 
 def fit(model, data, u=None, *, criterion="likelihood", method="robust", particles=100,
         smoother="tanizaki", max_iter=500, starts=8, seed=1, spread=0.3, patience=100,
-        time=None, progress=None, threads=None, strict=False):
+        time=None, progress=None, threads=None, strict=False, polish=True):
     """``sysid fit --model``. ``criterion="likelihood"`` (the default): maximum
     likelihood for a model file's free parameters, by the method the command line
     chooses: closed-form particle EM when the equations are affine in them (``method``
@@ -249,7 +249,8 @@ def fit(model, data, u=None, *, criterion="likelihood", method="robust", particl
     the noise-free model's simulation error minimised over the free parameters and the
     initial state (Levenberg-Marquardt from the file's values and ``starts - 1``
     perturbations, each value times ``exp(spread N(0, 1))``); returns
-    ``SimulationFitResults``."""
+    ``SimulationFitResults``. ``polish`` (robust method): maximise a 10 000-particle
+    likelihood directly from the EM estimate (``--polish off`` is ``polish=False``)."""
     model = _model(model)
     s = model._signals(data, u, time)
     if criterion == "simulation":
@@ -262,7 +263,7 @@ def fit(model, data, u=None, *, criterion="likelihood", method="robust", particl
                           "criterion")
     with partial_as(lambda raw: ModelFitResults(raw, model.origin)):
         raw = _sysid.fit_model(model._compiled, s.y, s.u, method, particles, smoother,
-                               max_iter, starts, seed, progress, threads)
+                               max_iter, starts, seed, progress, threads, bool(polish))
     return report(ModelFitResults(raw, model.origin), strict, "fit")
 
 

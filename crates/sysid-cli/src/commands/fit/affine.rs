@@ -135,6 +135,9 @@ pub(super) fn fit_options(
     options.smoother = chosen_smoother(o)?;
     options.iterations = o.max_iter;
     options.starts = o.starts;
+    if o.polish == "off" {
+        options.polish_particles = 0;
+    }
     options.check().map_err(|e| match e {
         AffineEmError::InvalidOption { name, reason } => bad(
             match name {
@@ -540,7 +543,11 @@ where
     let summary = serde_json::json!({
         "method": "robust", "seed": o.seed, "smoother": o.smoother,
         "interrupted": fit.interrupted,
-        "loglik": fit.loglik, "loglik_particles": options.select_particles,
+        "loglik": fit.loglik, "loglik_particles": fit.loglik_particles,
+        "polish": fit.polish.as_ref().map(|p| serde_json::json!({
+            "particles": p.particles, "evaluations": p.evaluations, "converged": p.converged,
+            "em_loglik": p.start_loglik, "loglik": p.loglik, "loglik_sd": p.loglik_sd,
+            "interrupted": p.interrupted})),
         "starts": starts, "local_maxima": maxima,
         "refinement": {"iterations": fit.refine_trace.len(), "particles": options.refine_particles,
             "averaged_last": fit.refine_trace.len() - fit.refine_trace.len() / 2,
@@ -569,21 +576,36 @@ where
     let mut report = summary;
     report["seconds"] = serde_json::json!({
         "explore": fit.timing.explore.as_secs_f64(), "select": fit.timing.select.as_secs_f64(),
-        "refine": fit.timing.refine.as_secs_f64(), "total": seconds,
+        "refine": fit.timing.refine.as_secs_f64(), "polish": fit.timing.polish.as_secs_f64(),
+        "total": seconds,
     });
     report["command"] = serde_json::json!("fit");
     report["out"] = serde_json::json!(o.out);
+    report["estimate"] = named(&fit.estimate);
     crate::report(o.json, report, || {
         let mut text = format!(
             "robust particle EM: {} starts, the best refined for {} iterations ({} particles) \
-             in {seconds:.2} s; log-likelihood {:.2} ({} particles); wrote {}\n  start  status                     log-likelihood",
+             in {seconds:.2} s; log-likelihood {:.2} ({} particles); wrote {}",
             o.starts,
             fit.refine_trace.len(),
             options.refine_particles,
             fit.loglik,
-            options.select_particles,
+            fit.loglik_particles,
             o.out.display()
         );
+        if let Some(p) = &fit.polish {
+            text += &format!(
+                "\n  checked by a {}-particle filter: the EM estimate scores {:.2}; maximised \
+                 directly ({} filters{}): {:.2} (sd {:.2})",
+                p.particles,
+                p.start_loglik,
+                p.evaluations,
+                if p.converged { ", converged" } else { "" },
+                p.loglik,
+                p.loglik_sd
+            );
+        }
+        text += "\n  start  status                     log-likelihood";
         for (k, s) in fit.starts.iter().enumerate() {
             let mark = if s.status == StartStatus::Explored {
                 "*"

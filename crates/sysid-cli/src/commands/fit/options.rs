@@ -84,9 +84,13 @@ pub struct Options {
     /// (Varadhan and Roland 2008; monotone like EM, three E-steps per cycle, often tens
     /// of times fewer E-steps to the optimum); `none` runs plain EM.
     pub accelerate: String,
-    /// Linear EM: after EM, maximise the exact log-likelihood by BFGS (quasi-Newton,
-    /// superlinear near the maximum, where EM crawls): `auto` (the default) when the
-    /// free parameters number at most 20 (structural models), `on`, `off`.
+    /// After EM, maximise the likelihood directly. Linear EM: the exact log-likelihood
+    /// by BFGS (quasi-Newton, superlinear near the maximum, where EM crawls): `auto`
+    /// (the default) when the free parameters number at most 20 (structural models),
+    /// `on`, `off`. The robust particle driver (`fit nlbench`, `fit affine`): a
+    /// 10 000-particle log-likelihood on common random numbers by Nelder-Mead from
+    /// its estimate, which undoes the small-particle E-step's bias of the noise
+    /// variances (`auto` and `on`), or not (`off`).
     pub polish: String,
     /// Linear EM: standard errors of the free parameters from the observed information
     /// (the negative Hessian of the exact log-likelihood in the model's entries, by

@@ -63,3 +63,66 @@ fn the_robust_fit_never_returns_less_than_a_point_it_scored() {
         .unwrap();
     assert!(r < 1.0, "r = {r}");
 }
+
+/// Ctrl-C during `--polish on` (the tour's order-8 model: 132 parameters, about a
+/// minute of BFGS) stops within 2 s with exit 130 and writes a model at least as good
+/// as EM's (issue 48: it was ignored for 220 s).
+#[test]
+fn ctrl_c_stops_the_polish_and_keeps_the_em_result() {
+    let dir = scratch_dir();
+    let data = common::simulate(&dir, "lti2x2", 200, 1);
+    let (polished, em) = (dir.join("polished.json"), dir.join("em.json"));
+    let fit = |out: &Path, polish: &str| {
+        vec![
+            "fit".to_string(),
+            "lti".into(),
+            "--data".into(),
+            s(&data).into(),
+            "--order".into(),
+            "8".into(),
+            "--max-iter".into(),
+            "50".into(),
+            "--polish".into(),
+            polish.into(),
+            "--out".into(),
+            s(out).into(),
+        ]
+    };
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(fit(&polished, "on"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // EM's 50 iterations take well under a second; the polish about a minute
+    std::thread::sleep(std::time::Duration::from_secs(4));
+    let sent = std::time::Instant::now();
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let out = child.wait_with_output().unwrap();
+    let waited = sent.elapsed();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(waited.as_secs_f64() < 2.0, "{waited:?}: {stderr}");
+    assert!(stderr.contains("interrupted (Ctrl-C)"), "{stderr}");
+    assert!(!stderr.contains("stopped before converging"), "{stderr}");
+    let args = fit(&em, "off");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    common::assert_ok(&sysid(&args));
+    let loglik = |model: &Path| {
+        json_of(&sysid(&[
+            "loglik",
+            "--model",
+            s(model),
+            "--data",
+            s(&data),
+            "--json",
+        ]))["loglik"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(loglik(&polished) >= loglik(&em) - 1e-9);
+}

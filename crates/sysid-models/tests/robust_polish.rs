@@ -179,3 +179,45 @@ fn no_polish_when_switched_off() {
     assert!(fit.polish.is_none());
     assert_eq!(fit.loglik_particles, 200);
 }
+
+/// A budget smaller than Nelder–Mead's first simplex ends the polish with the best
+/// point evaluated (argmin unwraps the first simplex's costs: the budget must never be
+/// an error there).
+#[test]
+fn a_polish_budget_smaller_than_the_simplex_is_not_a_panic() {
+    let truth = model(0.8, 0.3, 0.5);
+    let simulation = truth
+        .simulate(&DMatrix::zeros(0, 100), &mut stream(13, 0))
+        .unwrap();
+    let y: Vec<f64> = simulation.record.y.iter().copied().collect();
+    let (affine, start) = LinearAffine::new(&truth).unwrap();
+    let spec = AffineEmSpec {
+        beta_y: false,
+        ..AffineEmSpec::default()
+    };
+    let options = RobustOptions {
+        starts: 1,
+        explore_iterations: 2,
+        explore_particles: 10,
+        refine_iterations: 2,
+        refine_particles: 10,
+        select_particles: 100,
+        polish_particles: 200,
+        polish_evaluations: 1,
+        ..RobustOptions::default()
+    };
+    let data = Series::new(&y, 1).unwrap();
+    let fit = fit_robust(
+        &affine,
+        data,
+        &start,
+        &spec,
+        &Tanizaki::default(),
+        &options,
+        1,
+    )
+    .unwrap();
+    let polish = fit.polish.expect("the polish ran");
+    assert!(!polish.converged && !polish.interrupted, "{polish:?}");
+    assert!(fit.loglik.is_finite());
+}

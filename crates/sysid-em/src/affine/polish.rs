@@ -48,6 +48,10 @@ pub const MAX_HALVINGS: usize = 6;
 /// below this (nats).
 pub const SD_TOLERANCE: f64 = 0.02;
 
+/// The cost of a point not evaluated (invalid, or past the budget): worse than any
+/// valid point.
+const UNEVALUATED: f64 = f64::MAX / 4.0;
+
 /// Independent filters that score the result (mean and sd).
 pub const REPEATS: usize = 4;
 
@@ -242,12 +246,9 @@ impl<A: AffineModel> CostFunction for Objective<'_, A> {
     type Output = f64;
 
     fn cost(&self, point: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        if (self.stop)() {
-            return Err(argmin::core::Error::msg("interrupted"));
-        }
         let l = self.evaluate(point);
         // Nelder-Mead needs a finite order: an invalid point is worse than any valid one
-        Ok(if l.is_finite() { -l } else { f64::MAX / 4.0 })
+        Ok(if l.is_finite() { -l } else { UNEVALUATED })
     }
 }
 
@@ -348,7 +349,7 @@ pub(crate) fn polish<A: AffineModel>(
         let result = Executor::new(&budgeted, solver)
             .configure(|s| s.max_iters(evaluations as u64))
             .run();
-        converged = *budgeted.stalled.borrow()
+        converged = (*budgeted.stalled.borrow() && !stop())
             || result.is_ok_and(|r| {
                 matches!(
                     r.state().get_termination_status(),
@@ -388,13 +389,15 @@ impl<A: AffineModel> CostFunction for &Budgeted<'_, '_, A> {
     type Output = f64;
 
     fn cost(&self, point: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        // never an error: argmin's Nelder-Mead unwraps the costs of its first simplex;
+        // past the budget, a stall or a stop, the rest of its iterations are cheap
+        // no-ops and the best point evaluated is the answer
         let count = *self.inner.evaluations.borrow();
         if count - self.inner.progress.borrow().0 >= self.stall {
             *self.stalled.borrow_mut() = true;
-            return Err(argmin::core::Error::msg("no progress"));
         }
-        if count >= self.budget {
-            return Err(argmin::core::Error::msg("evaluation budget spent"));
+        if *self.stalled.borrow() || count >= self.budget || (self.inner.stop)() {
+            return Ok(UNEVALUATED);
         }
         self.inner.cost(point)
     }

@@ -39,7 +39,10 @@ pub use pipeline::{
     MAX_ORDER, Matrix, OrderChoice, OrderRow, OrderTable, Selection, Signals, SingularPart, Start,
     Switch, ValidationFit, basis_for_output_matrix, transform_state,
 };
-pub use quasi_newton::{QuasiNewtonOptions, QuasiNewtonOutcome, coordinate_count, maximise_loglik};
+pub use quasi_newton::{
+    QuasiNewtonOptions, QuasiNewtonOutcome, coordinate_count, maximise_loglik,
+    maximise_loglik_until,
+};
 pub use squarem::SquaremLinearEm;
 pub use uncertainty::{ParameterEstimate, Uncertainty, UncertaintyError, standard_errors};
 

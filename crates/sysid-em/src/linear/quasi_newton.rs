@@ -51,6 +51,9 @@ pub struct QuasiNewtonOutcome {
     /// The search headed to a collapsing `R` (a maximum on the boundary of the
     /// parameter set) and its result was not kept.
     pub boundary: bool,
+    /// The run's stop ([`maximise_loglik_until`]) ended the search: the result is the
+    /// best point evaluated before it (never worse than the start).
+    pub interrupted: bool,
 }
 
 /// One free block of the model in unconstrained coordinates.
@@ -345,10 +348,18 @@ struct NegativeLoglik<'a> {
     evaluations: Shared<usize>,
     /// The best point evaluated (a failed run keeps what it found).
     best: Shared<Option<(f64, Vec<f64>)>>,
+    /// Asked before every filter pass: `true` ends the search.
+    stop: &'a dyn Fn() -> bool,
+    /// Whether `stop` ended it.
+    interrupted: Shared<bool>,
 }
 
 impl NegativeLoglik<'_> {
     fn value(&self, point: &[f64]) -> f64 {
+        if *self.interrupted.borrow() || (self.stop)() {
+            *self.interrupted.borrow_mut() = true;
+            return INVALID;
+        }
         *self.evaluations.borrow_mut() += 1;
         let value = self
             .coordinates
@@ -383,6 +394,9 @@ impl CostFunction for NegativeLoglik<'_> {
         if *self.wall.borrow() {
             return Err(argmin::core::Error::msg("R collapsed"));
         }
+        if *self.interrupted.borrow() {
+            return Err(argmin::core::Error::msg("interrupted"));
+        }
         Ok(value)
     }
 }
@@ -414,6 +428,9 @@ impl Gradient for NegativeLoglik<'_> {
                 (false, true) => (centre - down) / step,
                 (false, false) => 0.0,
             };
+        }
+        if *self.interrupted.borrow() {
+            return Err(argmin::core::Error::msg("interrupted"));
         }
         Ok(grad)
     }
@@ -453,6 +470,22 @@ pub fn maximise_loglik(
     spec: &LinearEmSpec,
     options: &QuasiNewtonOptions,
 ) -> Result<QuasiNewtonOutcome, LinearEmError> {
+    maximise_loglik_until(start, records, spec, options, &|| false)
+}
+
+/// [`maximise_loglik`] that ends when `stop()` turns true (asked before every filter
+/// pass, so within one pass of a Ctrl-C), with the best point evaluated so far and
+/// [`QuasiNewtonOutcome::interrupted`] set.
+///
+/// # Errors
+/// As [`maximise_loglik`].
+pub fn maximise_loglik_until(
+    start: &LinearGaussianModel,
+    records: &[Record],
+    spec: &LinearEmSpec,
+    options: &QuasiNewtonOptions,
+    stop: &dyn Fn() -> bool,
+) -> Result<QuasiNewtonOutcome, LinearEmError> {
     let loglik_before = loglik_dataset(start, records)?;
     let unchanged = |status: String, parameters| QuasiNewtonOutcome {
         model: start.clone(),
@@ -464,6 +497,7 @@ pub fn maximise_loglik(
         status,
         converged: false,
         boundary: false,
+        interrupted: false,
     };
     let coordinates = match Coordinates::new(start, spec) {
         Ok(c) => c,
@@ -491,6 +525,7 @@ pub fn maximise_loglik(
     let best_seen: Shared<Option<(f64, Vec<f64>)>> = Shared::default();
     let wall: Shared<bool> = Shared::default();
     let evaluations: Shared<usize> = Shared::default();
+    let interrupted: Shared<bool> = Shared::default();
     let (mut point, mut iterations, mut status) = (first, 0u64, String::new());
     let mut converged = false;
     // BFGS, restarted from its best point with a fresh inverse Hessian when it stops
@@ -506,6 +541,8 @@ pub fn maximise_loglik(
             wall: std::rc::Rc::clone(&wall),
             evaluations: std::rc::Rc::clone(&evaluations),
             best: std::rc::Rc::clone(&best_seen),
+            stop,
+            interrupted: std::rc::Rc::clone(&interrupted),
         };
         let solver = BFGS::new(MoreThuenteLineSearch::new())
             .with_tolerance_grad(options.tol_grad)
@@ -541,7 +578,7 @@ pub fn maximise_loglik(
         let Some((value, best)) = best_seen.borrow().clone() else {
             break;
         };
-        if *wall.borrow() {
+        if *wall.borrow() || *interrupted.borrow() {
             break;
         }
         point = best;
@@ -551,6 +588,11 @@ pub fn maximise_loglik(
         }
     }
     let evaluations = *evaluations.borrow();
+    let interrupted = *interrupted.borrow();
+    if interrupted {
+        status = "interrupted".into();
+        converged = false;
+    }
     let tracked = best_seen.borrow_mut().take().map(|(_, x)| x);
     if let Some(model) = tracked.and_then(|p| coordinates.model(&p))
         && let Ok(loglik) = loglik_dataset(&model, records)
@@ -582,6 +624,7 @@ pub fn maximise_loglik(
             status,
             converged,
             boundary: false,
+            interrupted,
         });
     }
     // BFGS may meet its tolerance without improving on the start (EM had reached the
@@ -590,6 +633,7 @@ pub fn maximise_loglik(
         iterations,
         evaluations,
         converged: converged && !*wall.borrow(),
+        interrupted,
         ..unchanged(format!("{status} (no improvement kept)"), parameters)
     })
 }

@@ -60,7 +60,7 @@ pub use warning::LinearFitWarning;
 
 use crate::linear::{
     Covariance, LinearEmError, LinearEmSpec, QuasiNewtonOptions, QuasiNewtonOutcome, Uncertainty,
-    coordinate_count, fit, fit_squarem, maximise_loglik, standard_errors,
+    coordinate_count, fit, fit_squarem, maximise_loglik_until, standard_errors,
 };
 use crate::{EmObserver, EmOptions, EmResult, Termination};
 use nalgebra::DVector;
@@ -404,14 +404,23 @@ fn fit_prepared(
         && run.loglik.is_some()
         && !matches!(run.termination, Termination::Error { .. })
     {
-        let outcome = maximise_loglik(
+        let stop = || observer.should_stop();
+        let outcome = maximise_loglik_until(
             &run.estimate,
             records,
             &spec,
             &QuasiNewtonOptions::default(),
+            &stop,
         )?;
         run.estimate = outcome.model.clone();
         run.loglik = Some(outcome.loglik);
+        if outcome.interrupted {
+            // Ctrl-C in the polish: the fit ends as interrupted, with EM's estimate or
+            // the better point the polish had reached
+            run.termination = Termination::Interrupted {
+                iteration: run.iterations,
+            };
+        }
         polish = Some(outcome);
     }
     let failure = match &run.termination {
@@ -432,7 +441,10 @@ fn fit_prepared(
     };
     // a polish that ran and stopped short of its own criterion (not at a boundary,
     // which is reported apart) leaves an unconverged estimate, whatever EM did
-    let polish_short = polish.as_ref().filter(|p| !p.converged && !p.boundary);
+    // (an interrupted one is reported as the interruption)
+    let polish_short = polish
+        .as_ref()
+        .filter(|p| !p.converged && !p.boundary && !p.interrupted);
     let status = if polish.as_ref().is_some_and(|p| p.converged) {
         FitStatus::Converged
     } else if polish_short.is_some() {
@@ -498,8 +510,9 @@ fn fit_prepared(
         // not identifiable: no errors unless asked
         Switch::Auto => feasible && !(spec.a && spec.c),
     };
-    let uncertainty = match (want_errors && !interrupted)
-        .then(|| standard_errors(&run.estimate, records, &spec))
+    let uncertainty = match (want_errors
+        && !matches!(run.termination, Termination::Interrupted { .. }))
+    .then(|| standard_errors(&run.estimate, records, &spec))
     {
         Some(Ok(u)) => Some(u),
         Some(Err(e)) => {

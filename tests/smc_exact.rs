@@ -523,10 +523,15 @@ fn the_filter_team_gives_the_sequential_bits_in_every_setting() {
                     parallel: threads > 1,
                     share_busy_processors: true,
                     record_summaries,
+                    // the genealogy's variance estimate: thread-independent too
+                    variance_block: Some(2),
                 })
                 .unwrap();
                 let summary = pf.run(&model, &data, 31).unwrap();
-                filter_bits(&pf, summary.loglik, summary.resampled_steps)
+                (
+                    filter_bits(&pf, summary.loglik, summary.resampled_steps),
+                    summary.loglik_variance.map(f64::to_bits),
+                )
             })
         };
         let sequential = run(1);

@@ -102,7 +102,7 @@ fn demo_prints_the_table_and_draws_the_five_figures() {
             "true state",
             "smoothed mean",
             "time step t",
-            "steps 1-100 of 1000",
+            "steps 1-100 of 500",
         ],
     );
     assert_figure(

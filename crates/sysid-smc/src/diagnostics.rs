@@ -234,6 +234,7 @@ impl FilterDiagnostics {
         if repeats > 0 {
             let quiet = FilterOptions {
                 record_summaries: false,
+                variance_block: None,
                 ..options.clone()
             };
             match ParticleFilter::new(quiet) {

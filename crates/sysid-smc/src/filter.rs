@@ -78,6 +78,7 @@ use crate::systematic::{
     BlockPlan, BlockSums, Marks, block_running_sums, last_positive, mark_block, plan_blocks,
 };
 use crate::team::Team;
+use crate::variance::GenealogyVariance;
 use crate::vexp::exp_shifted_sum;
 use crate::weights::{max_value, sum_of_squares};
 use crate::{History, Series, SmcError};
@@ -115,6 +116,10 @@ pub struct FilterOptions {
     /// that need only the log-likelihood (PMMH) switch it off, which saves two passes
     /// over the weights per step; the log-likelihood and the history do not change.
     pub record_summaries: bool,
+    /// Estimate the Monte Carlo variance of the log-likelihood from this run's
+    /// genealogy, in spans of this many steps ([`FilterSummary::loglik_variance`],
+    /// `variance.rs`). Default `None`: the estimate costs two index gathers per step.
+    pub variance_block: Option<usize>,
 }
 
 impl Default for FilterOptions {
@@ -127,6 +132,7 @@ impl Default for FilterOptions {
             parallel: false,
             share_busy_processors: false,
             record_summaries: true,
+            variance_block: None,
         }
     }
 }
@@ -157,6 +163,9 @@ pub struct FilterSummary {
     pub loglik: f64,
     /// Number of steps after which the filter resampled.
     pub resampled_steps: usize,
+    /// The single-run estimate of `Var(loglik)` (with
+    /// [`FilterOptions::variance_block`]).
+    pub loglik_variance: Option<f64>,
 }
 
 /// A bootstrap particle filter with its reusable buffers (the workspace).
@@ -183,6 +192,7 @@ pub struct ParticleFilter {
     ess: Vec<f64>,
     history: History,
     has_history: bool,
+    variance: GenealogyVariance,
 }
 
 impl ParticleFilter {
@@ -209,6 +219,7 @@ impl ParticleFilter {
             ess: Vec::new(),
             history: History::default(),
             has_history: false,
+            variance: GenealogyVariance::default(),
         })
     }
 
@@ -337,6 +348,9 @@ impl ParticleFilter {
             };
             self.execute(model, data, normalise, team);
             let ess = self.record(n, summaries);
+            if self.options.variance_block.is_some() {
+                self.variance.observe(t, &self.weights);
+            }
             reset_log_weight = None;
             if more {
                 let resample = always || ess < self.options.ess_threshold * m as f64;
@@ -352,6 +366,9 @@ impl ParticleFilter {
                 } else {
                     self.ancestors.copy_from_slice(&self.identity);
                 }
+                if self.options.variance_block.is_some() {
+                    self.variance.advance(&self.ancestors);
+                }
                 if resample {
                     reset_log_weight = Some(uniform_log_weight);
                     resampled_steps += 1;
@@ -362,9 +379,14 @@ impl ParticleFilter {
                 std::mem::swap(&mut self.states, &mut self.previous);
             }
         }
+        let loglik_variance = self
+            .options
+            .variance_block
+            .map(|_| self.variance.finish(&self.weights));
         Ok(FilterSummary {
             loglik,
             resampled_steps,
+            loglik_variance,
         })
     }
 
@@ -391,6 +413,9 @@ impl ParticleFilter {
         self.means.reserve(steps * n);
         self.ess.clear();
         self.ess.reserve(steps);
+        if let Some(block) = self.options.variance_block {
+            self.variance.start(block, m);
+        }
         self.has_history = self.options.store_history;
         if self.has_history {
             self.history.reset(n, m, steps);

@@ -41,6 +41,7 @@ mod streams;
 mod systematic;
 mod team;
 mod trial_numbers;
+mod variance;
 mod vexp;
 pub mod weights;
 

@@ -111,6 +111,10 @@ fn smc_error(context: &str) -> impl Fn(SmcError) -> CliError + '_ {
     }
 }
 
+/// Spans of the single-run variance estimate of `sysid pf` (2 steps: the measured
+/// best on lgss and nlbench, docs in sysid_smc's variance.rs).
+const SINGLE_RUN_SPAN: usize = 2;
+
 /// The most repeats `--repeats` takes: the sd of 1001 runs is known to 2 %.
 const MAX_REPEATS: usize = 1000;
 
@@ -141,6 +145,7 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
         parallel: crate::threads() > 1,
         share_busy_processors: false,
         record_summaries: true,
+        variance_block: None,
     };
     options.check().map_err(option_error)?;
     Ok(options)
@@ -285,7 +290,11 @@ fn filter_with<M: FilterModel + Sync>(
     model: &M,
     columns: Columns,
 ) -> Result<(), CliError> {
-    let options = filter_options(a, false)?;
+    let options = FilterOptions {
+        // the single-run estimate of the log-likelihood's sd (sysid_smc's variance.rs)
+        variance_block: Some(SINGLE_RUN_SPAN),
+        ..filter_options(a, false)?
+    };
     let names = state_names(&columns, model.state_dim());
     let file = read_series(a, columns)?;
     // particles and their copy, weights, log-weights and ancestors; the filtered
@@ -323,6 +332,7 @@ fn filter_with<M: FilterModel + Sync>(
             "command": "pf", "loglik": run.loglik, "resampled_steps": run.resampled_steps,
             "steps": series.steps(), "particles": a.particles, "seed": a.seed,
             "seconds": seconds, "out": a.out, "diagnostics": trust.json(),
+            "loglik_sd_single_run": run.loglik_variance.map(f64::sqrt),
             "warnings": trust.warnings,
         });
         crate::say(&s.to_string());
@@ -335,8 +345,12 @@ fn filter_with<M: FilterModel + Sync>(
             .min_ess()
             .map(|(e, t)| format!("; smallest ESS {e:.1} at step {}", t + 1))
             .unwrap_or_default();
+        let single = run
+            .loglik_variance
+            .map(|v| format!(", single-run sd {}", fmt(v.sqrt())))
+            .unwrap_or_default();
         crate::say(&format!(
-            "loglik estimate {}{sd} ({} particles, resampled at {} of {} steps{ess})",
+            "loglik estimate {}{sd}{single} ({} particles, resampled at {} of {} steps{ess})",
             run.loglik,
             a.particles,
             run.resampled_steps,

@@ -848,4 +848,11 @@ fn resid_of_a_model_file_equals_the_library() {
     let text = summary.to_string();
     let q = library.outputs[0].ljung_box.statistic;
     assert!(text.contains(&format!("{q}")), "Q = {q} not in {text}");
+    // the tanks' errors are correlated (the file's process noise is held small): the
+    // advice is about the equations and the noise, not a linear model's order
+    let warnings = summary["warnings"].to_string();
+    assert!(
+        warnings.contains("revise the equations") && !warnings.contains("higher order"),
+        "{warnings}"
+    );
 }

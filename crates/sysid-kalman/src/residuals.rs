@@ -302,6 +302,13 @@ impl ResidualWarning {
     /// The warning with the outputs and inputs called by these names (`y1`, `u1`, ...
     /// where a name is missing).
     pub fn message(&self, outputs: &[String], inputs: &[String]) -> String {
+        self.message_advising(outputs, inputs, "try a higher order")
+    }
+
+    /// [`ResidualWarning::message`] with `advice` for correlated errors instead of a
+    /// linear model's ("try a higher order"): a model file's is about its equations
+    /// and its process noise.
+    pub fn message_advising(&self, outputs: &[String], inputs: &[String], advice: &str) -> String {
         let name = |names: &[String], k: usize, prefix: char| {
             names
                 .get(k)
@@ -315,7 +322,7 @@ impl ResidualWarning {
                 lags,
             } => format!(
                 "the one-step errors of {} are correlated (Ljung-Box p = {p_value:.2e} over \
-                 {lags} lags): the model misses dynamics of the data; try a higher order",
+                 {lags} lags): the model misses dynamics of the data; {advice}",
                 name(outputs, *output, 'y')
             ),
             ResidualWarning::InputCorrelated {

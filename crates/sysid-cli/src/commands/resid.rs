@@ -42,6 +42,12 @@ pub struct Options {
     pub json: bool,
 }
 
+/// What correlated one-step errors of a model file ask for (a model file has no order
+/// to raise).
+const MODEL_FILE_ADVICE: &str = "revise the equations, or make the process noise free in the file \
+     and fit it (`sysid fit --model`): a process noise held too small makes the one-step \
+     predictions follow the noise-free simulation";
+
 /// The correlations of one output's standardised errors.
 pub fn run(o: &Options) -> Result<(), CliError> {
     let figures = o
@@ -55,7 +61,8 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .chain(figures.iter().flatten().map(|p| p.as_path()))
         .collect();
     crate::files::refuse_existing(targets, o.force)?;
-    let (tests, file) = if crate::commands::nonlinear::is_model_file(o.source.model_path()) {
+    let model_file = crate::commands::nonlinear::is_model_file(o.source.model_path());
+    let (tests, file) = if model_file {
         model_file_tests(o)?
     } else {
         linear_tests(o)?
@@ -80,7 +87,13 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let warnings: Vec<String> = tests
         .warnings()
         .iter()
-        .map(|w| w.message(names.outputs, names.inputs))
+        .map(|w| {
+            if model_file {
+                w.message_advising(names.outputs, names.inputs, MODEL_FILE_ADVICE)
+            } else {
+                w.message(names.outputs, names.inputs)
+            }
+        })
         .collect();
     let summaries: Vec<serde_json::Value> = tests
         .outputs

@@ -134,8 +134,8 @@ fn ctrl_c_stops_the_polish_and_keeps_the_em_result() {
 
 /// The README tour's order-8 fit drives R to 5e-7 of the outputs' variance (truth
 /// 0.05): a boundary maximum, which is now said, with a bound as the advice; followed,
-/// the advice raises the likelihood of a fresh record of the same system (by about
-/// 5 nats) and the warning is gone.
+/// the advice raises the likelihood of a fresh record of the same system (302.6 to
+/// 317.1) and the fit converges without a warning.
 #[test]
 fn a_collapsing_r_is_flagged_and_bounding_it_helps_on_fresh_data() {
     let dir = scratch_dir();
@@ -174,8 +174,10 @@ fn a_collapsing_r_is_flagged_and_bounding_it_helps_on_fresh_data() {
         .iter()
         .find(|w| w.contains("R's smallest variance"))
         .unwrap_or_else(|| panic!("{first:?}"));
-    assert!(advice.contains("--min-output-noise 1e-4"), "{advice}");
-    let second = warnings(&fit(&bounded, &["--min-output-noise", "1e-4"]));
+    assert!(advice.contains("--min-output-noise 1e-3"), "{advice}");
+    let second = warnings(&fit(&bounded, &["--min-output-noise", "1e-3"]));
+    // followed, it converges without a warning at all
+    assert!(second.is_empty(), "{second:?}");
     assert!(
         !second.iter().any(|w| w.contains("R's smallest variance")),
         "{second:?}"

@@ -124,7 +124,7 @@ impl std::fmt::Display for LinearFitWarning {
                 part.description,
                 part.matrix,
                 if part.matrix == "R" {
-                    "--min-output-noise 1e-4"
+                    "--min-output-noise 1e-3"
                 } else {
                     "--min-variance"
                 }

@@ -67,9 +67,9 @@ pub const STALL_EVALUATIONS_PER_VERTEX: usize = 5;
 pub struct Polish {
     /// Particles of its filter.
     pub particles: usize,
-    /// The EM estimate's log-likelihood by that filter (mean of [`REPEATS`]).
+    /// The EM estimate's log-likelihood by that filter (mean of 4 independent runs).
     pub start_loglik: f64,
-    /// The polished estimate's (mean of [`REPEATS`] independent filters).
+    /// The polished estimate's (mean of 4 independent filters).
     pub loglik: f64,
     /// The Monte Carlo standard deviation of one filter at the polished estimate,
     /// from the repeats.

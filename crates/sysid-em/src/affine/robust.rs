@@ -631,7 +631,7 @@ where
         (estimate, loglik, options.select_particles, None)
     } else {
         let began = Instant::now();
-        let (polished, report) = polished(
+        let outcome = polished(
             model,
             data,
             &estimate,
@@ -640,13 +640,25 @@ where
             stream(seed, u64::MAX - 1).random(),
             stop,
             &mut warnings,
-        )?;
+        );
         timing.polish = began.elapsed();
-        if report.loglik > report.start_loglik {
-            (polished, report.loglik, report.particles, Some(report))
-        } else {
-            let l = report.start_loglik;
-            (estimate, l, report.particles, Some(report))
+        match outcome {
+            Ok((polished, report)) if report.loglik > report.start_loglik => {
+                (polished, report.loglik, report.particles, Some(report))
+            }
+            Ok((_, report)) => {
+                let l = report.start_loglik;
+                (estimate, l, report.particles, Some(report))
+            }
+            // the fit stands without its check: said, not an error
+            Err(e) => {
+                warnings.push(format!(
+                    "the estimate could not be checked by the {}-particle filter ({e}): it \
+                     is the EM refinement's, scored by the {}-particle filter",
+                    options.polish_particles, options.select_particles
+                ));
+                (estimate, loglik, options.select_particles, None)
+            }
         }
     };
     Ok(RobustFit {

@@ -142,12 +142,12 @@ fn the_polish_lands_on_the_exact_maximum_of_a_linear_model() {
     );
 }
 
-/// Without the polish the driver reports the selection filter's score and no polish.
-#[test]
-fn no_polish_when_switched_off() {
+/// A tiny robust fit of 100 steps of the truth (seed `data_seed`) from the truth,
+/// `C` held.
+fn tiny_fit(data_seed: u64, options: &RobustOptions) -> sysid_em::affine::RobustFit {
     let truth = model(0.8, 0.3, 0.5);
     let simulation = truth
-        .simulate(&DMatrix::zeros(0, 100), &mut stream(12, 0))
+        .simulate(&DMatrix::zeros(0, 100), &mut stream(data_seed, 0))
         .unwrap();
     let y: Vec<f64> = simulation.record.y.iter().copied().collect();
     let (affine, start) = LinearAffine::new(&truth).unwrap();
@@ -155,6 +155,22 @@ fn no_polish_when_switched_off() {
         beta_y: false,
         ..AffineEmSpec::default()
     };
+    let data = Series::new(&y, 1).unwrap();
+    fit_robust(
+        &affine,
+        data,
+        &start,
+        &spec,
+        &Tanizaki::default(),
+        options,
+        1,
+    )
+    .unwrap()
+}
+
+/// Without the polish the driver reports the selection filter's score and no polish.
+#[test]
+fn no_polish_when_switched_off() {
     let options = RobustOptions {
         starts: 2,
         explore_iterations: 4,
@@ -165,17 +181,7 @@ fn no_polish_when_switched_off() {
         polish_particles: 0,
         ..RobustOptions::default()
     };
-    let data = Series::new(&y, 1).unwrap();
-    let fit = fit_robust(
-        &affine,
-        data,
-        &start,
-        &spec,
-        &Tanizaki::default(),
-        &options,
-        1,
-    )
-    .unwrap();
+    let fit = tiny_fit(12, &options);
     assert!(fit.polish.is_none());
     assert_eq!(fit.loglik_particles, 200);
 }
@@ -185,16 +191,6 @@ fn no_polish_when_switched_off() {
 /// an error there).
 #[test]
 fn a_polish_budget_smaller_than_the_simplex_is_not_a_panic() {
-    let truth = model(0.8, 0.3, 0.5);
-    let simulation = truth
-        .simulate(&DMatrix::zeros(0, 100), &mut stream(13, 0))
-        .unwrap();
-    let y: Vec<f64> = simulation.record.y.iter().copied().collect();
-    let (affine, start) = LinearAffine::new(&truth).unwrap();
-    let spec = AffineEmSpec {
-        beta_y: false,
-        ..AffineEmSpec::default()
-    };
     let options = RobustOptions {
         starts: 1,
         explore_iterations: 2,
@@ -206,17 +202,7 @@ fn a_polish_budget_smaller_than_the_simplex_is_not_a_panic() {
         polish_evaluations: 1,
         ..RobustOptions::default()
     };
-    let data = Series::new(&y, 1).unwrap();
-    let fit = fit_robust(
-        &affine,
-        data,
-        &start,
-        &spec,
-        &Tanizaki::default(),
-        &options,
-        1,
-    )
-    .unwrap();
+    let fit = tiny_fit(13, &options);
     let polish = fit.polish.expect("the polish ran");
     assert!(!polish.converged && !polish.interrupted, "{polish:?}");
     assert!(fit.loglik.is_finite());

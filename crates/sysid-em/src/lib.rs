@@ -7,6 +7,7 @@
 //! * [`gradient`]: particle EM with a BFGS M-step for any model with log-densities.
 
 pub mod affine;
+mod box_qp;
 mod fit_run;
 pub mod gradient;
 pub mod linear;

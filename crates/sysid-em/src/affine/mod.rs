@@ -25,6 +25,7 @@
 //! Schön, Wills and Ninness (2006), "Maximum likelihood nonlinear system estimation";
 //! ALGORITHMS.md 3.
 
+mod constraints;
 mod fit;
 mod model;
 mod moments;
@@ -34,6 +35,7 @@ mod psaem;
 mod robust;
 mod stats;
 
+pub use constraints::{AffineConstraints, CoefficientSlot, TiedCoefficient};
 pub use fit::{
     AffineFit, AffineFitOptions, AffineFitReport, AffineMethod, CheckedAffineFitOptions, fit_affine,
 };

@@ -1,6 +1,6 @@
 //! Models affine in their parameters, and their parameter values.
 
-use super::AffineEmError;
+use super::{AffineConstraints, AffineEmError};
 use nalgebra::{DMatrix, DVector};
 use sysid_smc::{FilterModel, TransitionDensity};
 
@@ -161,6 +161,15 @@ pub trait AffineModel: Sync {
     /// [`held_state_coefficients`](Self::held_state_coefficients)); default: none.
     fn held_output_coefficients(&self) -> Vec<Vec<usize>> {
         vec![Vec::new(); self.output_dim()]
+    }
+
+    /// Coefficients tied together or bounded, and noise variances held inside an
+    /// estimated block ([`AffineConstraints`]); default `None`: every estimated
+    /// coefficient is a parameter of its own, unbounded, and a noise block is
+    /// estimated or held whole. With constraints, the M-step is the constrained one
+    /// (`constraints.rs`) and the robust driver keeps its starts inside them.
+    fn constraints(&self) -> Option<AffineConstraints> {
+        None
     }
 
     /// The SMC model at `params`; errors on invalid values (e.g. a non-positive

@@ -1,5 +1,6 @@
 //! The closed-form M-step of affine EM.
 
+use super::constraints::constrained_m_step;
 use super::{AffineEmError, AffineEmSpec, AffineModel, AffineParams, AffineStatistics};
 use crate::linear::Covariance;
 use crate::regression::{Block, regress};
@@ -167,13 +168,19 @@ fn fit_block(block: &BlockInput<'_>, regressors: usize) -> Result<BlockFit, Affi
 /// block and read off the triangular factor of the statistics (the Cholesky route of
 /// `crate::regression`, no inverse formed, `Pi` PSD by construction). With structural
 /// zeros and a diagonal `Pi`, one least-squares problem per row. The initial state, if
-/// estimated: `mu = E[x_0]`, `P1 = E[x_0 x_0'] - mu mu'`.
+/// estimated: `mu = E[x_0]`, `P1 = E[x_0 x_0'] - mu mu'`. A model with
+/// [`AffineModel::constraints`] gets the constrained M-step of `constraints.rs`
+/// (weighted least squares over tied coefficients, bounded, alternated with the free
+/// variances).
 pub fn m_step<A: AffineModel>(
     model: &A,
     stats: &AffineStatistics,
     current: &AffineParams,
     spec: &AffineEmSpec,
 ) -> Result<AffineParams, AffineEmError> {
+    if let Some(constraints) = model.constraints() {
+        return constrained_m_step(model, stats, current, spec, &constraints).map(|(p, _)| p);
+    }
     let r = model.regressor_dim();
     let (state_structure, output_structure) = (model.state_structure(), model.output_structure());
     let state = fit_block(

@@ -11,18 +11,28 @@
 //! with one regressor per (equation, parameter) and a known coefficient 1 on each
 //! equation's remainder `alpha_0` (held: never estimated).
 //!
-//! It qualifies when: every free parameter of the equations appears in one equation
-//! only, linearly and without bounds; each noise variance is either a free parameter
-//! of its own or free of parameters, and each block (states, outputs) is all one or
-//! all the other (the M-step estimates a diagonal block or holds it); the initial law
-//! has no free parameter. [`ModelFile::why_not_affine`] says which rule a model breaks.
+//! It qualifies when: every free parameter of the equations enters them linearly (it
+//! may appear in several equations, as an outflow coefficient shared by two tanks, and
+//! it may have bounds); each noise variance is either a free parameter of its own or
+//! free of parameters (a block may mix the two); the initial law has no free
+//! parameter. [`ModelFile::why_not_affine`] says which rule a model breaks.
+//!
+//! A shared or bounded coefficient, or a noise block that mixes free and fixed
+//! variances, makes the form carry [`AffineConstraints`]: the M-step is then the
+//! constrained one of `sysid_em::affine` (weighted least squares over the shared
+//! coefficients, bounded, alternated with the free variances), still closed form.
+//! Bounds are honoured as closed bounds moved inside the file's open support by
+//! `1e-9` of their size (at least `1e-9`), so an estimate on a bound stays valid.
 
 use crate::ModelFile;
 use crate::expr::{BinOp, Expr, Node, Var};
 use crate::program::Program;
 use crate::smc::{ExprSmc, with_lanes};
 use nalgebra::{DMatrix, DVector};
-use sysid_em::affine::{AffineEmError, AffineEmSpec, AffineModel, AffineParams};
+use sysid_em::affine::{
+    AffineConstraints, AffineEmError, AffineEmSpec, AffineModel, AffineParams, CoefficientSlot,
+    TiedCoefficient,
+};
 use sysid_em::linear::Covariance;
 use sysid_pmcmc::Support;
 use sysid_smc::ModelError;
@@ -125,9 +135,22 @@ pub struct ExprAffine {
     output_structure: Vec<Vec<usize>>,
     state_held: Vec<Vec<usize>>,
     output_held: Vec<Vec<usize>>,
-    /// By parameter index (all parameters; `None` for fixed ones).
-    slots: Vec<Option<Slot>>,
+    /// By parameter index (all parameters; empty for fixed ones): where it sits, once
+    /// per equation that uses it.
+    slots: Vec<Vec<Slot>>,
     spec: AffineEmSpec,
+    /// Shared or bounded coefficients, mixed noise blocks; `None` when there are none.
+    constraints: Option<AffineConstraints>,
+}
+
+/// A parameter's support as closed bounds just inside it (see the module docs).
+fn closed_bounds(support: Support) -> (f64, f64) {
+    let inside = |b: f64| 1e-9 * b.abs().max(1.0);
+    match support {
+        Support::Real => (f64::NEG_INFINITY, f64::INFINITY),
+        Support::Positive => (inside(0.0), f64::INFINITY),
+        Support::Interval(a, b) => (a + inside(a), b - inside(b)),
+    }
 }
 
 impl ExprAffine {
@@ -137,7 +160,7 @@ impl ExprAffine {
         let params = &spec.parameters;
         let free = |k: usize| !params[k].fixed;
         let name = |k: usize| params[k].name.clone();
-        let mut slots: Vec<Option<Slot>> = vec![None; params.len()];
+        let mut slots: Vec<Vec<Slot>> = vec![Vec::new(); params.len()];
         let mut regressors: Vec<Expr> = Vec::new();
         let (n, p) = (spec.states.len(), spec.outputs.len());
         let mut structures = vec![Vec::new(); n + p];
@@ -150,43 +173,26 @@ impl ExprAffine {
                 structures[row].push(col);
                 match key {
                     None => held[row].push(col),
-                    Some(k) => {
-                        if slots[k].is_some() {
-                            return Err(format!(
-                                "the free parameter {} appears in two equations (the \
-                                 closed-form M-step estimates each coefficient of each \
-                                 equation on its own)",
-                                name(k)
-                            )
-                            .into());
-                        }
-                        if params[k].support != Support::Real {
-                            return Err(format!(
-                                "the coefficient {} has bounds (the closed-form M-step does \
-                                 not honour bounds)",
-                                name(k)
-                            )
-                            .into());
-                        }
-                        slots[k] = Some(if row < n {
-                            Slot::StateCoef(row, col)
-                        } else {
-                            Slot::OutputCoef(row - n, col)
-                        });
-                    }
+                    Some(k) => slots[k].push(if row < n {
+                        Slot::StateCoef(row, col)
+                    } else {
+                        Slot::OutputCoef(row - n, col)
+                    }),
                 }
             }
         }
+        // each free variance: a slot of its own; a block with some free is estimated
+        // diagonally, its fixed entries held
         let block = |variances: &[Expr],
                      block: &str,
                      slot: fn(usize) -> Slot,
-                     slots: &mut Vec<Option<Slot>>|
-         -> Result<Covariance, ModelError> {
-            let mut free_count = 0;
+                     slots: &mut Vec<Vec<Slot>>|
+         -> Result<(Covariance, Vec<usize>), ModelError> {
+            let mut fixed = Vec::new();
             for (i, v) in variances.iter().enumerate() {
                 match v.node {
                     Node::Var(Var::Param(k)) if free(k) => {
-                        if slots[k].is_some() {
+                        if !slots[k].is_empty() {
                             return Err(format!(
                                 "the free parameter {} is a noise variance and appears \
                                  elsewhere too",
@@ -194,8 +200,7 @@ impl ExprAffine {
                             )
                             .into());
                         }
-                        slots[k] = Some(slot(i));
-                        free_count += 1;
+                        slots[k].push(slot(i));
                     }
                     _ if v.any(&|s| matches!(s.node, Node::Var(Var::Param(k)) if free(k))) => {
                         return Err(format!(
@@ -205,26 +210,50 @@ impl ExprAffine {
                         )
                         .into());
                     }
-                    _ => {}
+                    _ => fixed.push(i),
                 }
             }
-            match free_count {
-                0 => Ok(Covariance::Fixed),
-                c if c == variances.len() => Ok(Covariance::Diagonal),
-                _ => Err(format!(
-                    "some {block} noise variances are free and others fixed (the \
-                     closed-form M-step estimates a block or holds it)"
-                )
-                .into()),
-            }
+            Ok(if fixed.len() == variances.len() {
+                (Covariance::Fixed, Vec::new())
+            } else {
+                (Covariance::Diagonal, fixed)
+            })
         };
-        let pi_x = block(&spec.process_noise, "process", Slot::ProcessVar, &mut slots)?;
-        let pi_y = block(
+        let (pi_x, held_process) =
+            block(&spec.process_noise, "process", Slot::ProcessVar, &mut slots)?;
+        let (pi_y, held_measurement) = block(
             &spec.measurement_noise,
             "measurement",
             Slot::MeasurementVar,
             &mut slots,
         )?;
+        let mut tied = Vec::new();
+        let mut needs_constraints = !held_process.is_empty() || !held_measurement.is_empty();
+        for (k, ks) in slots.iter().enumerate() {
+            let coefficients: Vec<CoefficientSlot> = ks
+                .iter()
+                .filter_map(|s| match *s {
+                    Slot::StateCoef(row, col) => Some(CoefficientSlot::State { row, col }),
+                    Slot::OutputCoef(row, col) => Some(CoefficientSlot::Output { row, col }),
+                    _ => None,
+                })
+                .collect();
+            if coefficients.is_empty() {
+                continue;
+            }
+            let (lower, upper) = closed_bounds(params[k].support);
+            needs_constraints |= coefficients.len() > 1 || params[k].support != Support::Real;
+            tied.push(TiedCoefficient {
+                slots: coefficients,
+                lower,
+                upper,
+            });
+        }
+        let constraints = needs_constraints.then_some(AffineConstraints {
+            coefficients: tied,
+            held_process_variances: held_process,
+            held_measurement_variances: held_measurement,
+        });
         let initial_free = spec
             .initial_mean
             .iter()
@@ -256,6 +285,7 @@ impl ExprAffine {
             state_held: held,
             output_held,
             slots,
+            constraints,
         })
     }
 
@@ -269,10 +299,10 @@ impl ExprAffine {
         &self.file
     }
 
-    /// Where parameter `k` (an index of all the file's parameters) sits; `None` for a
-    /// fixed one.
-    pub(crate) fn slot(&self, k: usize) -> Option<Slot> {
-        self.slots[k]
+    /// Where parameter `k` (an index of all the file's parameters) sits, once per
+    /// equation that uses it; empty for a fixed one.
+    pub(crate) fn slots(&self, k: usize) -> &[Slot] {
+        &self.slots[k]
     }
 
     /// The regressors as text (for messages and the docs).
@@ -302,11 +332,13 @@ impl ExprAffine {
                 beta_y[(row, c)] = 1.0;
             }
         }
-        for (slot, &v) in self.slots.iter().zip(&values) {
-            match slot {
-                Some(Slot::StateCoef(i, c)) => beta_x[(*i, *c)] = v,
-                Some(Slot::OutputCoef(j, c)) => beta_y[(*j, *c)] = v,
-                _ => {}
+        for (slots, &v) in self.slots.iter().zip(&values) {
+            for slot in slots {
+                match slot {
+                    Slot::StateCoef(i, c) => beta_x[(*i, *c)] = v,
+                    Slot::OutputCoef(j, c) => beta_y[(*j, *c)] = v,
+                    _ => {}
+                }
             }
         }
         let lookup = |v: crate::expr::Var| match v {
@@ -334,11 +366,11 @@ impl ExprAffine {
         let spec = self.file.spec();
         spec.free()
             .into_iter()
-            .map(|k| match self.slots[k] {
-                Some(Slot::StateCoef(i, c)) => params.beta_x[(i, c)],
-                Some(Slot::OutputCoef(j, c)) => params.beta_y[(j, c)],
-                Some(Slot::ProcessVar(i)) => params.pi_x[(i, i)],
-                Some(Slot::MeasurementVar(j)) => params.pi_y[(j, j)],
+            .map(|k| match self.slots[k].first() {
+                Some(Slot::StateCoef(i, c)) => params.beta_x[(*i, *c)],
+                Some(Slot::OutputCoef(j, c)) => params.beta_y[(*j, *c)],
+                Some(Slot::ProcessVar(i)) => params.pi_x[(*i, *i)],
+                Some(Slot::MeasurementVar(j)) => params.pi_y[(*j, *j)],
                 None => spec.parameters[k].value,
             })
             .collect()
@@ -405,6 +437,10 @@ impl AffineModel for ExprAffine {
     }
     fn held_output_coefficients(&self) -> Vec<Vec<usize>> {
         self.output_held.clone()
+    }
+
+    fn constraints(&self) -> Option<AffineConstraints> {
+        self.constraints.clone()
     }
 
     fn smc_model(&self, params: &AffineParams) -> Result<ExprSmc, AffineEmError> {

@@ -91,10 +91,31 @@ impl AffineConjugate {
         let mut free = Vec::with_capacity(priors.len());
         for (&k, prior) in free_params.iter().zip(priors) {
             let name = &spec.parameters[k].name;
-            let slot = affine.slot(k).ok_or_else(|| {
-                format!("{name} is neither a coefficient nor a whole noise variance")
-            })?;
+            let slot = match *affine.slots(k) {
+                [] => {
+                    return Err(format!(
+                        "{name} is neither a coefficient nor a whole noise variance"
+                    )
+                    .into());
+                }
+                [slot] => slot,
+                _ => {
+                    return Err(format!(
+                        "{name} appears in {} equations: the conjugate step draws each \
+                         coefficient of each equation on its own",
+                        affine.slots(k).len()
+                    )
+                    .into());
+                }
+            };
             let coefficient = matches!(slot, Slot::StateCoef(..) | Slot::OutputCoef(..));
+            if coefficient && spec.parameters[k].support != sysid_pmcmc::Support::Real {
+                return Err(format!(
+                    "{name} is a bounded coefficient: the conjugate step's normal draw \
+                     ignores bounds"
+                )
+                .into());
+            }
             match (coefficient, prior) {
                 (true, ScalarPrior::Normal { .. }) | (false, ScalarPrior::InverseGamma { .. }) => {}
                 (true, _) => {

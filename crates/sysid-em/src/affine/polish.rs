@@ -32,7 +32,9 @@
 //! `evaluations + 2 (variances) x MAX_HALVINGS + 2 x REPEATS` filters of
 //! `O(T M)` each; the filter shares its particles among the free processors.
 
-use super::{AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure};
+use super::{
+    AffineConstraints, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure,
+};
 use crate::linear::Covariance;
 use argmin::core::{CostFunction, Executor, State, TerminationReason, TerminationStatus};
 use argmin::solver::neldermead::NelderMead;
@@ -93,6 +95,9 @@ enum Coordinate {
     ProcessVariance(usize),
     /// `ln Pi_y[(i, i)]`.
     MeasurementVariance(usize),
+    /// Tied coefficient `k` of the model's [`AffineConstraints`] (all its coefficients
+    /// at once, clamped to its bounds).
+    Tied(usize),
 }
 
 impl Coordinate {
@@ -112,29 +117,50 @@ fn coordinates<A: AffineModel>(
     spec: &AffineEmSpec,
 ) -> Vec<Coordinate> {
     let mut out = Vec::new();
-    if spec.beta_x {
-        let free = free_structure(&model.state_structure(), &model.held_state_coefficients());
-        for (row, used) in free.iter().enumerate() {
-            out.extend(used.iter().map(|&j| Coordinate::StateCoefficient(row, j)));
+    let constraints = model.constraints();
+    match &constraints {
+        Some(c) if spec.beta_x && spec.beta_y => {
+            out.extend((0..c.coefficients.len()).map(Coordinate::Tied));
+        }
+        _ => {
+            if spec.beta_x {
+                let free =
+                    free_structure(&model.state_structure(), &model.held_state_coefficients());
+                for (row, used) in free.iter().enumerate() {
+                    out.extend(used.iter().map(|&j| Coordinate::StateCoefficient(row, j)));
+                }
+            }
+            if spec.beta_y {
+                let free =
+                    free_structure(&model.output_structure(), &model.held_output_coefficients());
+                for (row, used) in free.iter().enumerate() {
+                    out.extend(used.iter().map(|&j| Coordinate::OutputCoefficient(row, j)));
+                }
+            }
         }
     }
-    if spec.beta_y {
-        let free = free_structure(&model.output_structure(), &model.held_output_coefficients());
-        for (row, used) in free.iter().enumerate() {
-            out.extend(used.iter().map(|&j| Coordinate::OutputCoefficient(row, j)));
-        }
-    }
+    let held = |process: bool| {
+        constraints.as_ref().map_or(Vec::new(), |c| {
+            if process {
+                c.held_process_variances.clone()
+            } else {
+                c.held_measurement_variances.clone()
+            }
+        })
+    };
     if spec.pi_x != Covariance::Fixed {
+        let held = held(true);
         out.extend(
             (0..base.pi_x.nrows())
-                .filter(|&i| base.pi_x[(i, i)] > 0.0)
+                .filter(|&i| base.pi_x[(i, i)] > 0.0 && !held.contains(&i))
                 .map(Coordinate::ProcessVariance),
         );
     }
     if spec.pi_y != Covariance::Fixed {
+        let held = held(false);
         out.extend(
             (0..base.pi_y.nrows())
-                .filter(|&i| base.pi_y[(i, i)] > 0.0)
+                .filter(|&i| base.pi_y[(i, i)] > 0.0 && !held.contains(&i))
                 .map(Coordinate::MeasurementVariance),
         );
     }
@@ -142,10 +168,16 @@ fn coordinates<A: AffineModel>(
 }
 
 /// The coordinates' values at `params`.
-fn values(params: &AffineParams, coordinates: &[Coordinate]) -> Vec<f64> {
+fn values(
+    params: &AffineParams,
+    coordinates: &[Coordinate],
+    constraints: Option<&AffineConstraints>,
+) -> Vec<f64> {
+    let tied = constraints.map(|c| c.values(params)).unwrap_or_default();
     coordinates
         .iter()
         .map(|c| match *c {
+            Coordinate::Tied(k) => tied[k],
             Coordinate::StateCoefficient(i, j) => params.beta_x[(i, j)],
             Coordinate::OutputCoefficient(i, j) => params.beta_y[(i, j)],
             Coordinate::ProcessVariance(i) => params.pi_x[(i, i)].ln(),
@@ -157,8 +189,14 @@ fn values(params: &AffineParams, coordinates: &[Coordinate]) -> Vec<f64> {
 /// `base` with the coordinates set to `point`; a covariance's variances are set by
 /// scaling its rows and columns, which keeps it symmetric PSD with the same
 /// correlations.
-fn at(base: &AffineParams, coordinates: &[Coordinate], point: &[f64]) -> AffineParams {
+fn at(
+    base: &AffineParams,
+    coordinates: &[Coordinate],
+    point: &[f64],
+    constraints: Option<&AffineConstraints>,
+) -> AffineParams {
     let mut params = base.clone();
+    let mut tied = constraints.map(|c| c.values(base)).unwrap_or_default();
     let mut scale_x = vec![1.0; base.pi_x.nrows()];
     let mut scale_y = vec![1.0; base.pi_y.nrows()];
     for (c, &v) in coordinates.iter().zip(point) {
@@ -169,7 +207,11 @@ fn at(base: &AffineParams, coordinates: &[Coordinate], point: &[f64]) -> AffineP
             Coordinate::MeasurementVariance(i) => {
                 scale_y[i] = (v - base.pi_y[(i, i)].ln()).exp();
             }
+            Coordinate::Tied(k) => tied[k] = v,
         }
+    }
+    if let Some(c) = constraints {
+        c.set(&mut params, &tied);
     }
     let scaled = |m: &DMatrix<f64>, s: &[f64]| {
         DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| {
@@ -188,6 +230,7 @@ fn at(base: &AffineParams, coordinates: &[Coordinate], point: &[f64]) -> AffineP
 /// The negative log-likelihood on common random numbers, with the best point seen.
 struct Objective<'a, A: AffineModel> {
     model: &'a A,
+    constraints: Option<AffineConstraints>,
     data: Series<'a>,
     base: &'a AffineParams,
     coordinates: &'a [Coordinate],
@@ -204,7 +247,12 @@ impl<A: AffineModel> Objective<'_, A> {
     /// The log-likelihood at `point` (`-inf` where the model is invalid or the filter
     /// fails).
     fn loglik(&self, point: &[f64], seed: u64) -> f64 {
-        let params = at(self.base, self.coordinates, point);
+        let params = at(
+            self.base,
+            self.coordinates,
+            point,
+            self.constraints.as_ref(),
+        );
         let Ok(smc) = self.model.smc_model(&params) else {
             return f64::NEG_INFINITY;
         };
@@ -276,8 +324,10 @@ pub(crate) fn polish<A: AffineModel>(
         ..FilterOptions::default()
     })?;
     let coords = coordinates(model, start, spec);
+    let constraints = model.constraints();
     let objective = Objective {
         model,
+        constraints: constraints.clone(),
         data,
         base: start,
         coordinates: &coords,
@@ -288,7 +338,7 @@ pub(crate) fn polish<A: AffineModel>(
         best: RefCell::new((Vec::new(), f64::NEG_INFINITY)),
         progress: RefCell::new((0, f64::NEG_INFINITY)),
     };
-    let origin = values(start, &coords);
+    let origin = values(start, &coords, constraints.as_ref());
     let (start_loglik, _) = objective.scored(&origin);
     if !start_loglik.is_finite() || objective.evaluate(&origin) == f64::NEG_INFINITY {
         return Err(AffineEmError::InvalidParams(format!(
@@ -359,7 +409,7 @@ pub(crate) fn polish<A: AffineModel>(
     }
     let (point, _) = objective.best.borrow().clone();
     let (loglik, loglik_sd) = objective.scored(&point);
-    let polished = at(start, &coords, &point);
+    let polished = at(start, &coords, &point, constraints.as_ref());
     let evaluations = *objective.evaluations.borrow();
     Ok((
         polished,

@@ -536,6 +536,14 @@ where
     if spec.pi_y == Covariance::Fixed {
         current.pi_y = start.pi_y.clone();
     }
+    if let Some(constraints) = model.constraints() {
+        for &i in &constraints.held_process_variances {
+            current.pi_x[(i, i)] = start.pi_x[(i, i)];
+        }
+        for &j in &constraints.held_measurement_variances {
+            current.pi_y[(j, j)] = start.pi_y[(j, j)];
+        }
+    }
     let began = Instant::now();
     let mut em = AffineEm::new(
         model,
@@ -831,6 +839,10 @@ fn perturbed<A: AffineModel>(
     }
     if spec.beta_y {
         shake(&mut params.beta_y, &free_output(model));
+    }
+    // a shared coefficient moves as one, inside its bounds
+    if let Some(constraints) = model.constraints() {
+        constraints.project(&mut params);
     }
     params
 }

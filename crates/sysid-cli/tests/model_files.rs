@@ -674,3 +674,66 @@ fn a_bad_cell_in_a_named_column_is_named() {
         assert_one_line_error(&out, &["osc.csv, line 6, column y", "cannot read \"abc\""]);
     }
 }
+
+#[test]
+fn long_fits_say_how_far_they_got_in_a_log() {
+    // stderr is a pipe here, as in a batch job: no bar, plain lines at the interval
+    // (SYSID_PROGRESS_SECONDS, 30 s by default; 0 here: a line at every tick)
+    let dir = scratch_dir();
+    let model = dir.join("osc.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let data = dir.join("osc.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--steps",
+        "100",
+        "--out",
+        s(&data),
+    ]);
+    let fit = |method: &str, model_text: &str, interval: &str| {
+        std::fs::write(&model, model_text).unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))
+            .args([
+                "fit",
+                "--model",
+                s(&model),
+                "--data",
+                s(&data),
+                "--method",
+                method,
+                "--max-iter",
+                "4",
+                "--particles",
+                "20",
+                "--starts",
+                "2",
+                "--force",
+                "--out",
+            ])
+            .arg(dir.join("fit.toml"))
+            .env("SYSID_PROGRESS_SECONDS", interval)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let em = fit("em", OSCILLATOR, "0");
+    assert!(em.contains("sysid: tanizaki: 1/4 loglik"), "{em}");
+    assert!(em.contains("sysid: tanizaki: 4/4 loglik"), "{em}");
+    let robust = fit("robust", OSCILLATOR, "0");
+    assert!(
+        robust.contains("sysid: robust particle EM: running ("),
+        "{robust}"
+    );
+    let gradient = fit("em", &OSCILLATOR.replace("c*v", "k*c*v"), "0");
+    assert!(gradient.contains("sysid: gradient EM: 1/4"), "{gradient}");
+    // at the default interval a short fit prints no progress line
+    let quiet = fit("em", OSCILLATOR, "30");
+    assert!(!quiet.contains("tanizaki:"), "{quiet}");
+}

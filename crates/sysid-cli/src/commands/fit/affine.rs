@@ -211,12 +211,17 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
     }
 }
 
-/// The progress bar of a run: EM's and PSAEM's iterations (the robust driver runs its
-/// starts in parallel and has none).
+/// The progress bar of a run: EM's and PSAEM's iterations; the robust driver runs its
+/// starts in parallel and has a spinner (off a terminal, a line every 30 s).
 pub(super) fn progress_of(job: &Job) -> Option<crate::progress::Progress> {
     let o = job.o;
     let label = match job.options.options().method {
-        AffineMethod::Robust => return None,
+        AffineMethod::Robust => {
+            return Some(crate::progress::Progress::spinner(
+                "robust particle EM",
+                o.json,
+            ));
+        }
         AffineMethod::Em => o.smoother.as_str(),
         _ => "psaem",
     };

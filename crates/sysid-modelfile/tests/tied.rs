@@ -84,16 +84,20 @@ fn without_ties_bounds_or_mixed_blocks_there_are_no_constraints() {
     assert_eq!(affine.constraints(), None);
 }
 
-/// `T` steps of the tanks at the file's values (a hand-written simulation).
-fn simulate(steps: usize) -> Vec<f64> {
+/// `T` steps of the tanks at the file's values (a hand-written simulation), the pump
+/// input held for `hold` steps at a time.
+fn simulate(steps: usize, hold: usize) -> Vec<f64> {
     use rand::RngExt;
     use rand_distr::{Distribution, StandardNormal};
     let mut rng = sysid_smc::stream(3, 0);
     let (k, a1, a2) = (0.5, 0.3, 0.25);
     let mut h = [2.8, 4.0];
     let mut data = Vec::new();
-    for _ in 0..steps {
-        let u: f64 = rng.random_range(0.4..1.0);
+    let mut u = 0.7;
+    for t in 0..steps {
+        if t % hold == 0 {
+            u = rng.random_range(0.4..1.0);
+        }
         let n: [f64; 3] = [
             StandardNormal.sample(&mut rng),
             StandardNormal.sample(&mut rng),
@@ -114,7 +118,7 @@ fn the_closed_form_fit_runs_and_keeps_the_constraints() {
     let file = ModelFile::parse(TANKS, "tanks.toml").unwrap();
     // a start off the truth, a1 at its upper bound's side
     let start = file.with_values(&[0.6, 0.25, 0.2, 0.01, 0.02]);
-    let data = simulate(300);
+    let data = simulate(300, 1);
     let (u, y): (Vec<f64>, Vec<f64>) = data.chunks_exact(2).map(|c| (c[0], c[1])).unzip();
     let series = Series::new(&y, 1).unwrap().with_inputs(&u, 1).unwrap();
     let mut options = AffineFitOptions::default();
@@ -142,4 +146,100 @@ fn the_closed_form_fit_runs_and_keeps_the_constraints() {
         fit.estimate
     );
     assert!(fit.warnings.iter().all(|w| !w.to_string().contains("NaN")));
+}
+
+/// The two-tank file of `../shared/data/nonlinear/twotank` (`tank_true.toml`): both
+/// process variances held at 1e-3, `a1` shared, every coefficient positive.
+const TWO_TANKS: &str = r#"
+format = 1
+states = ["h1", "h2"]
+inputs = ["u"]
+outputs = ["y"]
+[parameters]
+k  = { value = 0.5,  min = 0 }
+a1 = { value = 0.3,  min = 0 }
+a2 = { value = 0.25, min = 0 }
+r  = { value = 0.01, min = 0 }
+[transition]
+h1 = "h1 + k*u - a1*sqrt(max(h1, 0))"
+h2 = "h2 + a1*sqrt(max(h1, 0)) - a2*sqrt(max(h2, 0))"
+[observation]
+y = "h2"
+[noise]
+h1 = 1e-3
+h2 = 1e-3
+y = "r"
+[initial]
+h1 = { mean = 2.8, variance = 0.1 }
+h2 = { mean = 4.0, variance = 0.1 }
+"#;
+
+#[test]
+fn extrapolation_carries_a_crawling_refinement_up_the_likelihood() {
+    use rand::RngExt;
+    use sysid_em::affine::{RobustOptions, fit_robust};
+    // the data as that folder's: a pump level held 20 steps at a time, 600 steps
+    let file = ModelFile::parse(TWO_TANKS, "tank_true.toml").unwrap();
+    let mut rng = sysid_smc::stream(5, 1);
+    let mut u = Vec::new();
+    while u.len() < 600 {
+        let level: f64 = rng.random_range(0.3..1.5);
+        u.extend(std::iter::repeat_n(level, 20));
+    }
+    let (_, y) = file
+        .at(&file.free_values())
+        .unwrap()
+        .simulate(600, &u, 5)
+        .unwrap();
+    let series = Series::new(&y, 1).unwrap().with_inputs(&u, 1).unwrap();
+    // from tank.toml's rough start, EM crawls along the ridge of equal steady levels
+    // (k u = a2 sqrt(h2)) for thousands of iterations
+    let affine = file.affine().unwrap();
+    let start = affine.params(&[0.8, 0.15, 0.4, 0.05]).unwrap();
+    let fit = |extrapolate: bool| {
+        let options = RobustOptions {
+            starts: 2,
+            explore_iterations: 25,
+            refine_iterations: 300,
+            polish_particles: 0,
+            extrapolate,
+            ..RobustOptions::default()
+        };
+        fit_robust(
+            &affine,
+            series,
+            &start,
+            &affine.em_spec(),
+            &sysid_smc::Tanizaki::default(),
+            &options,
+            4,
+        )
+        .unwrap()
+    };
+    let (on, off) = (fit(true), fit(false));
+    let k = |f: &sysid_em::affine::RobustFit| affine.theta(&f.estimate)[0];
+    eprintln!(
+        "with jumps {:.1} (k {:.3}, {:?}), without {:.1} (k {:.3})",
+        on.loglik,
+        k(&on),
+        on.extrapolation,
+        off.loglik,
+        k(&off)
+    );
+    assert_eq!(off.extrapolation.tried, 0);
+    assert!(on.extrapolation.taken > 0, "{:?}", on.extrapolation);
+    // both scored by the same 1000-particle filter on common random numbers; the
+    // crawl is hundreds of nats long, a filter's noise a few
+    assert!(
+        on.loglik > off.loglik + 20.0,
+        "with jumps {:.1}, without {:.1}",
+        on.loglik,
+        off.loglik
+    );
+    assert!(
+        (k(&on) - 0.5).abs() < (k(&off) - 0.5).abs(),
+        "k {} against {}",
+        k(&on),
+        k(&off)
+    );
 }

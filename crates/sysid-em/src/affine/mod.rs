@@ -30,6 +30,7 @@ mod fit;
 mod model;
 mod moments;
 mod mstep;
+mod overrelax;
 mod polish;
 mod psaem;
 mod robust;
@@ -44,8 +45,8 @@ pub use mstep::m_step;
 pub use polish::Polish;
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{
-    LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome, StartStatus,
-    describe, fit_robust, fit_robust_until,
+    Extrapolation, LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome,
+    StartStatus, describe, fit_robust, fit_robust_until,
 };
 pub use stats::{AffineStatistics, StatisticsCollector};
 

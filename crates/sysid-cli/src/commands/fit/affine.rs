@@ -555,8 +555,10 @@ where
             "interrupted": p.interrupted})),
         "starts": starts, "local_maxima": maxima,
         "refinement": {"iterations": fit.refine_trace.len(), "particles": options.refine_particles,
-            "averaged_last": fit.refine_trace.len() - fit.refine_trace.len() / 2,
-            "settled": settled, "largest_change_last_quarters": change},
+            "averaged_last": fit.refine_trace.len()
+                - (fit.refine_trace.len() / 2).max(fit.extrapolation.last),
+            "settled": settled, "largest_change_last_quarters": change,
+            "jumps_tried": fit.extrapolation.tried, "jumps_taken": fit.extrapolation.taken},
         "warnings": fit.warnings.iter().chain(&job.extra_warnings).collect::<Vec<_>>(),
     });
     let mut outputs = vec![(
@@ -598,6 +600,13 @@ where
             fit.loglik_particles,
             o.out.display()
         );
+        if fit.extrapolation.taken > 0 {
+            text += &format!(
+                "\n  the refinement crawled: {} of {} extrapolated jumps along its drift raised \
+                 the likelihood and were taken (the last at iteration {})",
+                fit.extrapolation.taken, fit.extrapolation.tried, fit.extrapolation.last
+            );
+        }
         if let Some(p) = &fit.polish {
             text += &format!(
                 "\n  checked by a {}-particle filter: the EM estimate scores {:.2}; maximised \

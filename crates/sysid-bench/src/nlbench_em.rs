@@ -82,6 +82,10 @@ pub struct Args {
     /// results), and the polish would multiply the study's time by about 5.
     #[arg(long, default_value_t = 0)]
     pub polish_particles: usize,
+    /// robust: extrapolate the refinement's drift (`RobustOptions::extrapolate`, the
+    /// library's default). Off by default here: the documented studies ran without it.
+    #[arg(long)]
+    pub extrapolate: bool,
     /// Start every run at the truth (the no-drift check) instead of a random start.
     #[arg(long)]
     pub at_truth: bool,
@@ -137,6 +141,7 @@ fn method(a: &Args) -> Result<Method, String> {
             noise_inflation: a.inflation,
             runaway_factor: a.runaway_factor,
             polish_particles: a.polish_particles,
+            extrapolate: a.extrapolate,
             ..RobustOptions::default()
         }),
         other => {

@@ -111,7 +111,9 @@ fn run_one(a: &Args, run: usize) -> Result<(serde_json::Value, bool, bool), Stri
                 &RobustOptions {
                     max_escalations: a.max_escalations,
                     // the study as measured (docs/particle-em.md), before the polish
+                    // and the extrapolated refinement
                     polish_particles: 0,
+                    extrapolate: false,
                     ..RobustOptions::default()
                 },
                 run_seed(2),

@@ -305,6 +305,37 @@ impl ExprAffine {
         &self.slots[k]
     }
 
+    /// The bounded coefficients among the free values `theta` that sit on a bound:
+    /// (index in the file's parameters, value, the file's bound). The M-step's closed
+    /// bounds are `1e-9` inside the file's open ones; a value within `1e-7` of the
+    /// file's bound is on it (an average of iterates that left the bound is further).
+    pub(crate) fn on_bounds(&self, theta: &[f64]) -> Vec<(usize, f64, f64)> {
+        let spec = self.file.spec();
+        let values = self.file.full_values(theta);
+        let mut out = Vec::new();
+        for (k, slots) in self.slots.iter().enumerate() {
+            let coefficient = slots
+                .iter()
+                .any(|s| matches!(s, Slot::StateCoef(..) | Slot::OutputCoef(..)));
+            let (low, high) = match spec.parameters[k].support {
+                Support::Real => continue,
+                Support::Positive => (0.0, f64::INFINITY),
+                Support::Interval(a, b) => (a, b),
+            };
+            if !coefficient {
+                continue;
+            }
+            let v = values[k];
+            let near = |b: f64| (v - b).abs() <= 1e-7 * b.abs().max(1.0);
+            if near(low) {
+                out.push((k, v, low));
+            } else if high.is_finite() && near(high) {
+                out.push((k, v, high));
+            }
+        }
+        out
+    }
+
     /// The regressors as text (for messages and the docs).
     pub fn regressor_texts(&self) -> Vec<String> {
         let spec = self.file.spec();

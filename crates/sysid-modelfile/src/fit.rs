@@ -299,7 +299,7 @@ impl ModelFile {
         };
         let fit = fit_affine(affine, data, start, &options, run, &mut values)?;
         let estimate = affine.theta(fit.estimate());
-        let warnings = match &fit.report {
+        let mut warnings: Vec<FileFitWarning> = match &fit.report {
             sysid_em::affine::AffineFitReport::Robust(r) => r
                 .warnings
                 .iter()
@@ -308,6 +308,13 @@ impl ModelFile {
                 .collect(),
             _ => Vec::new(),
         };
+        for (k, value, bound) in affine.on_bounds(&estimate) {
+            warnings.push(FileFitWarning::AtBound {
+                name: self.spec().parameters[k].name.clone(),
+                value,
+                bound,
+            });
+        }
         Ok(FileFit {
             fitted: self.with_values(&estimate),
             estimate,

@@ -243,3 +243,69 @@ fn extrapolation_carries_a_crawling_refinement_up_the_likelihood() {
         k(&off)
     );
 }
+
+#[test]
+fn a_coefficient_held_at_its_bound_by_the_data_is_flagged() {
+    use rand_distr::{Distribution, StandardNormal};
+    // x' = a x + w, y = x + e at a = 0.9; the file caps a at 0.5
+    let ar = |bounds: &str| {
+        format!(
+            r#"
+format = 1
+states = ["x"]
+outputs = ["y"]
+[parameters]
+a = {{ value = 0.3{bounds} }}
+[transition]
+x = "a*x"
+[observation]
+y = "x"
+[noise]
+x = 1.0
+y = 0.1
+[initial]
+x = {{ mean = 0, variance = 1 }}
+"#
+        )
+    };
+    let mut rng = sysid_smc::stream(8, 0);
+    let (mut x, mut y) = (0.0, Vec::new());
+    for _ in 0..300 {
+        let (w, e): (f64, f64) = (
+            StandardNormal.sample(&mut rng),
+            StandardNormal.sample(&mut rng),
+        );
+        y.push(x + 0.1f64.sqrt() * e);
+        x = 0.9 * x + w;
+    }
+    let series = Series::new(&y, 1).unwrap();
+    let mut options = AffineFitOptions::default();
+    options.method = AffineMethod::Em;
+    options.particles = 50;
+    options.iterations = 30;
+    let options = options.check().unwrap();
+    let fit = |bounds: &str| {
+        ModelFile::parse(&ar(bounds), "ar.toml")
+            .unwrap()
+            .fit(series, &options, &FitRun::new(1), &mut ())
+            .unwrap()
+    };
+    let capped = fit(", min = -1, max = 0.5");
+    let a = capped.estimate[0];
+    assert!(a < 0.5 && a > 0.5 - 1e-8, "{a}");
+    let flagged: Vec<String> = capped.warnings.iter().map(ToString::to_string).collect();
+    assert!(
+        flagged
+            .iter()
+            .any(|w| w.starts_with("a = ") && w.contains("its bound 0.5")),
+        "{flagged:?}"
+    );
+    // bounds the data do not reach are not flagged
+    let free = fit(", min = -1, max = 1");
+    assert!((free.estimate[0] - 0.9).abs() < 0.1, "{:?}", free.estimate);
+    assert!(
+        free.warnings
+            .iter()
+            .all(|w| !w.to_string().contains("its bound"))
+    );
+}

@@ -175,6 +175,26 @@ impl AffineConstraints {
     }
 }
 
+/// Whether EM estimates each variance of a block (`process`: the state block): none of
+/// a held block, else every one the constraints do not hold.
+pub(crate) fn estimated_variances(
+    covariance: Covariance,
+    rows: usize,
+    constraints: Option<&AffineConstraints>,
+    process: bool,
+) -> Vec<bool> {
+    let held = constraints.map_or(&[][..], |c| {
+        if process {
+            &c.held_process_variances
+        } else {
+            &c.held_measurement_variances
+        }
+    });
+    (0..rows)
+        .map(|i| covariance != Covariance::Fixed && !held.contains(&i))
+        .collect()
+}
+
 /// One block's statistics and current values, for the constrained M-step.
 struct Rows<'a> {
     moments: &'a DMatrix<f64>,
@@ -216,30 +236,27 @@ pub(crate) fn constrained_m_step<A: AffineModel>(
             })
             .collect()
     };
-    let free_variance = |covariance: Covariance, rows: usize, held: &[usize]| -> Vec<bool> {
-        (0..rows)
-            .map(|i| covariance != Covariance::Fixed && !held.contains(&i))
-            .collect()
-    };
     let blocks = [
         Rows {
             moments: &stats.state,
             steps: stats.state_steps,
             known: known(&current.beta_x, model.held_state_coefficients()),
-            free_variance: free_variance(
+            free_variance: estimated_variances(
                 spec.pi_x,
                 model.state_dim(),
-                &constraints.held_process_variances,
+                Some(constraints),
+                true,
             ),
         },
         Rows {
             moments: &stats.output,
             steps: stats.output_steps,
             known: known(&current.beta_y, model.held_output_coefficients()),
-            free_variance: free_variance(
+            free_variance: estimated_variances(
                 spec.pi_y,
                 model.output_dim(),
-                &constraints.held_measurement_variances,
+                Some(constraints),
+                false,
             ),
         },
     ];

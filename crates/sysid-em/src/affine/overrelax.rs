@@ -17,6 +17,7 @@
 //! last jump (at least the last quarter), whose average is the estimate and whose
 //! quarters decide whether it settled, are plain EM.
 
+use super::constraints::estimated_variances;
 use super::{AffineEmSpec, AffineModel, AffineParams, free_structure};
 use crate::linear::Covariance;
 
@@ -114,15 +115,6 @@ fn extrapolated<A: AffineModel>(
             }
         }
     }
-    let held = |process: bool| {
-        constraints.as_ref().map_or(Vec::new(), |c| {
-            if process {
-                c.held_process_variances.clone()
-            } else {
-                c.held_measurement_variances.clone()
-            }
-        })
-    };
     for (process, covariance, pi_from, pi_to) in [
         (true, spec.pi_x, &from.pi_x, &to.pi_x),
         (false, spec.pi_y, &from.pi_y, &to.pi_y),
@@ -131,10 +123,11 @@ fn extrapolated<A: AffineModel>(
         if covariance != Covariance::Diagonal {
             continue;
         }
-        let held = held(process);
+        let estimated =
+            estimated_variances(covariance, pi_to.nrows(), constraints.as_ref(), process);
         for i in 0..pi_to.nrows() {
             let (a, b) = (pi_from[(i, i)], pi_to[(i, i)]);
-            if held.contains(&i) || !(a > 0.0 && b > 0.0) {
+            if !(estimated[i] && a > 0.0 && b > 0.0) {
                 continue;
             }
             let v = step(a.ln(), b.ln()).exp();

@@ -32,10 +32,10 @@
 //! `evaluations + 2 (variances) x MAX_HALVINGS + 2 x REPEATS` filters of
 //! `O(T M)` each; the filter shares its particles among the free processors.
 
+use super::constraints::estimated_variances;
 use super::{
     AffineConstraints, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure,
 };
-use crate::linear::Covariance;
 use argmin::core::{CostFunction, Executor, State, TerminationReason, TerminationStatus};
 use argmin::solver::neldermead::NelderMead;
 use nalgebra::DMatrix;
@@ -139,31 +139,22 @@ fn coordinates<A: AffineModel>(
             }
         }
     }
-    let held = |process: bool| {
-        constraints.as_ref().map_or(Vec::new(), |c| {
-            if process {
-                c.held_process_variances.clone()
-            } else {
-                c.held_measurement_variances.clone()
-            }
-        })
+    let estimated = |covariance, m: &DMatrix<f64>, process| -> Vec<usize> {
+        let free = estimated_variances(covariance, m.nrows(), constraints.as_ref(), process);
+        (0..m.nrows())
+            .filter(|&i| free[i] && m[(i, i)] > 0.0)
+            .collect()
     };
-    if spec.pi_x != Covariance::Fixed {
-        let held = held(true);
-        out.extend(
-            (0..base.pi_x.nrows())
-                .filter(|&i| base.pi_x[(i, i)] > 0.0 && !held.contains(&i))
-                .map(Coordinate::ProcessVariance),
-        );
-    }
-    if spec.pi_y != Covariance::Fixed {
-        let held = held(false);
-        out.extend(
-            (0..base.pi_y.nrows())
-                .filter(|&i| base.pi_y[(i, i)] > 0.0 && !held.contains(&i))
-                .map(Coordinate::MeasurementVariance),
-        );
-    }
+    out.extend(
+        estimated(spec.pi_x, &base.pi_x, true)
+            .into_iter()
+            .map(Coordinate::ProcessVariance),
+    );
+    out.extend(
+        estimated(spec.pi_y, &base.pi_y, false)
+            .into_iter()
+            .map(Coordinate::MeasurementVariance),
+    );
     out
 }
 

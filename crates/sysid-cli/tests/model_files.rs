@@ -505,6 +505,55 @@ fn ctrl_c_keeps_what_a_long_run_has() {
     assert!(!states.exists());
 }
 
+/// `--extrapolate off` reaches the robust driver: its refinement tries no jump, where
+/// the default tries one every 25 iterations from the second block on (in the first
+/// three quarters).
+#[test]
+fn extrapolate_off_runs_plain_em_in_the_refinement() {
+    let dir = scratch_dir();
+    let model = dir.join("osc.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let data = dir.join("osc.csv");
+    ok(&[
+        "simulate",
+        "--model",
+        s(&model),
+        "--steps",
+        "150",
+        "--out",
+        s(&data),
+    ]);
+    let jumps = |extrapolate: Option<&str>| {
+        let out = dir.join("fit.toml");
+        let mut args = vec![
+            "fit",
+            "--model",
+            s(&model),
+            "--data",
+            s(&data),
+            "--starts",
+            "1",
+            "--max-iter",
+            "80",
+            "--particles",
+            "50",
+            "--out",
+            s(&out),
+            "--force",
+            "--json",
+        ];
+        if let Some(x) = extrapolate {
+            args.extend(["--extrapolate", x]);
+        }
+        let report = json(&args);
+        report["refinement"]["jumps_tried"].as_u64().unwrap()
+    };
+    assert_eq!(jumps(Some("off")), 0);
+    // the first drift is measured between the blocks ending at 25 and 50, so one jump
+    // is due in the first 60 of 80 iterations
+    assert_eq!(jumps(None), 1);
+}
+
 /// `sysid fit CLASS --help` lists the options that class takes, and no other class's.
 #[test]
 fn each_fit_class_help_lists_only_its_own_options() {
@@ -533,6 +582,7 @@ fn each_fit_class_help_lists_only_its_own_options() {
         "starts",
         "estimate-noise",
         "system",
+        "extrapolate",
     ];
     let linear = [
         "order", "fix", "diag", "detrend", "split", "polish", "tol-nats", "full-r",

@@ -70,6 +70,9 @@ pub struct AffineFitOptions {
     /// directly; [`RobustOptions::polish_particles`]); 0 skips it. Default
     /// [`RobustOptions::default`]'s (10 000).
     pub polish_particles: usize,
+    /// Whether the robust driver's refinement extrapolates its drift
+    /// ([`RobustOptions::extrapolate`]). Default true.
+    pub extrapolate: bool,
 }
 
 impl Default for AffineFitOptions {
@@ -82,6 +85,7 @@ impl Default for AffineFitOptions {
             iterations: 100,
             starts: RobustOptions::default().starts,
             polish_particles: RobustOptions::default().polish_particles,
+            extrapolate: RobustOptions::default().extrapolate,
         }
     }
 }
@@ -120,6 +124,7 @@ impl AffineFitOptions {
             refine_particles: self.particles.max(2),
             explore_particles: (self.particles / 2).max(2),
             polish_particles: self.polish_particles,
+            extrapolate: self.extrapolate,
             ..RobustOptions::default()
         };
         if self.polish_particles == 1 {

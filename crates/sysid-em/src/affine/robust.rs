@@ -778,7 +778,7 @@ fn polished<A: AffineModel>(
     if report.loglik_sd > LOGLIK_SD_LIMIT {
         warnings.push(format!(
             "the {}-particle filter that scores the estimate has a Monte Carlo sd of {:.2} \
-             nats (over {LOGLIK_SD_LIMIT}): it cannot rank nearby points, so the polish may \
+             nats (above {LOGLIK_SD_LIMIT}): it cannot rank nearby points, so the polish may \
              have stopped early or moved by noise; raise the polish's particles",
             report.particles, report.loglik_sd
         ));

@@ -138,6 +138,7 @@ pub(super) fn fit_options(
     if o.polish == "off" {
         options.polish_particles = 0;
     }
+    options.extrapolate = o.extrapolate == "on";
     options.check().map_err(|e| match e {
         AffineEmError::InvalidOption { name, reason } => bad(
             match name {

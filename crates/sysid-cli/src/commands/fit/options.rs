@@ -92,6 +92,10 @@ pub struct Options {
     /// its estimate, which undoes the small-particle E-step's bias of the noise
     /// variances (`auto` and `on`), or not (`off`).
     pub polish: String,
+    /// The robust particle driver: `on` (the default) lets its refinement jump along
+    /// its own drift (overrelaxed EM, a jump kept only when the ranking filter gains a
+    /// nat); `off` runs plain EM iterations.
+    pub extrapolate: String,
     /// Linear EM: standard errors of the free parameters from the observed information
     /// (the negative Hessian of the exact log-likelihood in the model's entries, by
     /// central differences; a covariance by its upper triangle), with 95 % confidence
@@ -188,6 +192,7 @@ impl Options {
             initial: "model".into(),
             accelerate: "squarem".into(),
             polish: "auto".into(),
+            extrapolate: "on".into(),
             std_errors: "auto".into(),
             detrend: "none".into(),
             split: None,
@@ -216,6 +221,7 @@ impl Options {
         self.smoother = em.smoother;
         self.method = em.method;
         self.starts = em.starts;
+        self.extrapolate = em.extrapolate;
         self
     }
 

@@ -9,11 +9,13 @@
 //! cargo run --release -p sysid-bench -- pendulum-em [--runs 50 --method robust]
 //! cargo run --release -p sysid-bench -- modelfile-em [--runs 20 --iters 200]
 //! cargo run --release -p sysid-bench -- pmcmc [--reps 11]
+//! cargo run --release -p sysid-bench -- loglik-variance [--runs 200 --reps 11]
 //! cargo run --release -p sysid-bench -- wiener [--runs 100 --iters 100 --particles 100 --csv-dir out/]
 //! ```
 
 mod em;
 mod kalman;
+pub mod loglik_variance;
 mod lti2x2;
 mod modelfile_em;
 pub mod nlbench_em;
@@ -58,6 +60,9 @@ pub enum Runner {
         #[arg(long, default_value_t = 11)]
         reps: usize,
     },
+    /// The single-run sd of the particle log-likelihood against the sd over independent
+    /// runs (lgss at M = 100 and 1000, nlbench at 10 000), and its cost.
+    LoglikVariance(loglik_variance::Args),
     /// Seed-001 blind Wiener identification by gradient EM (one JSON line per
     /// realisation, then a summary).
     Wiener(wiener::Args),
@@ -133,6 +138,7 @@ pub fn run(runner: Runner) -> Result<(), String> {
         Runner::Smc { reps } => smc::run(reps.max(1)),
         Runner::Pmcmc { reps } => pmcmc::run(reps.max(1)),
         Runner::Wiener(args) => wiener::run(&args)?,
+        Runner::LoglikVariance(args) => loglik_variance::run(&args)?,
         Runner::NlbenchEm(args) => nlbench_em::run(&args)?,
         Runner::PendulumEm(args) => pendulum_em::run(&args)?,
         Runner::ModelfileEm(args) => modelfile_em::run(&args)?,

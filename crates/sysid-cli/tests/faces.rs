@@ -348,52 +348,71 @@ fn pf_and_its_diagnostics_equal_the_library() {
         "--out",
         s(&path),
     ]));
-    let run = sysid(&[
-        "pf",
-        "--system",
-        "nlbench",
-        "--data",
-        s(&path),
-        "--particles",
-        "300",
-        "--seed",
-        "5",
-        "--json",
-    ]);
-    let summary = json_of(&run);
-    let data = read_csv(&path, None);
-    let y: Vec<f64> = data.record.y.iter().copied().collect();
-    let series = Series::new(&y, 1).unwrap();
-    let mut pf = ParticleFilter::new(FilterOptions {
-        particles: 300,
-        resampling: Resampling::Systematic,
-        ess_threshold: 1.0,
-        ..FilterOptions::default()
-    })
-    .unwrap();
-    let model = sysid::models::Nlbench::truth();
-    let loglik = pf.run(&model, &series, 5).unwrap().loglik;
-    let checked = FilterDiagnostics::diagnose(&model, &series, &pf, loglik, 5, 9, || {});
-    assert_eq!(
-        summary["loglik"].as_f64().map(f64::to_bits),
-        Some(loglik.to_bits())
-    );
-    let d = &summary["diagnostics"];
-    assert_eq!(
-        d["loglik_sd"].as_f64().map(f64::to_bits),
-        checked.loglik_sd.map(f64::to_bits)
-    );
-    let repeats: Vec<f64> = d["repeat_logliks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    assert_eq!(repeats, checked.repeat_logliks);
-    assert_eq!(d["min_ess"].as_f64(), checked.min_ess.map(|(e, _)| e));
-    // the data file's times are the row numbers here, so the texts agree too
-    let warnings: Vec<String> = checked.warnings.iter().map(ToString::to_string).collect();
-    assert_eq!(summary["warnings"], serde_json::json!(warnings));
+    // the default (the single-run sd) and 9 repeats
+    for repeats in [0usize, 9] {
+        let repeats_text = repeats.to_string();
+        let run = sysid(&[
+            "pf",
+            "--system",
+            "nlbench",
+            "--data",
+            s(&path),
+            "--particles",
+            "300",
+            "--seed",
+            "5",
+            "--repeats",
+            &repeats_text,
+            "--json",
+        ]);
+        let summary = json_of(&run);
+        let data = read_csv(&path, None);
+        let y: Vec<f64> = data.record.y.iter().copied().collect();
+        let series = Series::new(&y, 1).unwrap();
+        let mut pf = ParticleFilter::new(FilterOptions {
+            particles: 300,
+            resampling: Resampling::Systematic,
+            ess_threshold: 1.0,
+            variance_block: Some(sysid::smc::VARIANCE_SPAN),
+            ..FilterOptions::default()
+        })
+        .unwrap();
+        let model = sysid::models::Nlbench::truth();
+        let filtered = pf.run(&model, &series, 5).unwrap();
+        let checked =
+            FilterDiagnostics::diagnose(&model, &series, &pf, &filtered, 5, repeats, || {});
+        assert_eq!(
+            summary["loglik"].as_f64().map(f64::to_bits),
+            Some(filtered.loglik.to_bits())
+        );
+        let d = &summary["diagnostics"];
+        assert_eq!(
+            d["loglik_sd"].as_f64().map(f64::to_bits),
+            checked.loglik_sd.map(f64::to_bits)
+        );
+        assert_eq!(
+            d["loglik_sd_single_run"].as_f64().map(f64::to_bits),
+            checked.loglik_sd_single_run.map(f64::to_bits)
+        );
+        let method = if repeats == 0 {
+            "single-run"
+        } else {
+            "repeats"
+        };
+        assert_eq!(d["loglik_sd_method"], method);
+        let logliks: Vec<f64> = d["repeat_logliks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(logliks, checked.repeat_logliks);
+        assert_eq!(logliks.len(), repeats);
+        assert_eq!(d["min_ess"].as_f64(), checked.min_ess.map(|(e, _)| e));
+        // the data file's times are the row numbers here, so the texts agree too
+        let warnings: Vec<String> = checked.warnings.iter().map(ToString::to_string).collect();
+        assert_eq!(summary["warnings"], serde_json::json!(warnings));
+    }
 }
 
 /// `sysid pmmh`'s summary and warnings are the library's `ChainReport` of the chains

@@ -88,6 +88,7 @@ fn psmooth_equals_the_filter_a_path_smoother_and_the_diagnostics() {
         let mut pf = ParticleFilter::new(FilterOptions {
             particles: 200,
             store_history: true,
+            variance_block: Some(sysid::smc::VARIANCE_SPAN),
             ..Default::default()
         })
         .unwrap();
@@ -109,8 +110,7 @@ fn psmooth_equals_the_filter_a_path_smoother_and_the_diagnostics() {
             bits(&paths.std_devs()),
             "{method}"
         );
-        let diagnostics =
-            FilterDiagnostics::diagnose(&model, &series, &pf, filtered.loglik, 3, 3, || {});
+        let diagnostics = FilterDiagnostics::diagnose(&model, &series, &pf, &filtered, 3, 3, || {});
         assert_eq!(
             summary["diagnostics"]["loglik_sd"]
                 .as_f64()

@@ -127,10 +127,10 @@ fn label(v: f64) -> String {
 }
 
 /// `sysid pf`: the filter's log-likelihood estimate, filtered means and ESS, and the
-/// diagnostics of `repeats` more runs.
+/// diagnostics: the sd from the run's genealogy, or from `repeats` more runs.
 #[pyfunction]
 #[pyo3(signature = (model, y, u=None, time=None, particles=1000, seed=1, resample="systematic",
-    ess=1.0, repeats=9, progress=None, threads=None))]
+    ess=1.0, repeats=0, progress=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn particle_filter<'py>(
     py: Python<'py>,
@@ -168,13 +168,14 @@ fn particle_filter<'py>(
             resampling,
             ess_threshold: ess,
             parallel: rayon::current_num_threads() > 1,
+            variance_block: Some(sysid::smc::VARIANCE_SPAN),
             ..FilterOptions::default()
         };
         let mut pf = ParticleFilter::new(options).map_err(|e| option_failure(&e))?;
         let summary = pf.run(&smc, &series, seed).map_err(Failure::sysid)?;
         control.tick();
         let checked =
-            FilterDiagnostics::diagnose(&smc, &series, &pf, summary.loglik, seed, repeats, || {
+            FilterDiagnostics::diagnose(&smc, &series, &pf, &summary, seed, repeats, || {
                 control.tick()
             });
         let seconds = began.elapsed().as_secs_f64();
@@ -207,6 +208,11 @@ fn particle_filter<'py>(
     )?;
     out.set_item("ess", PyArray1::from_vec(py, ess))?;
     out.set_item("loglik_sd", checked.loglik_sd)?;
+    out.set_item(
+        "loglik_sd_method",
+        checked.loglik_sd_method.map(|m| m.name()),
+    )?;
+    out.set_item("loglik_sd_single_run", checked.loglik_sd_single_run)?;
     out.set_item("repeat_logliks", checked.repeat_logliks.clone())?;
     out.set_item("min_ess", checked.min_ess.map(|(e, _)| e))?;
     out.set_item("min_ess_step", checked.min_ess.map(|(_, t)| t))?;

@@ -101,14 +101,19 @@ def test_n4sid_equals_the_command(tmp_path):
             assert ours[key] == theirs[key], key
 
 
-def test_particle_filter_equals_the_command(oscillator_record):
+@pytest.mark.parametrize("repeats", [0, 4])
+def test_particle_filter_equals_the_command(oscillator_record, repeats):
     summary = cli_json("pf", "--model", OSCILLATOR, "--data", oscillator_record,
-                       "--particles", 2000, "--seed", 3)
+                       "--particles", 2000, "--seed", 3, "--repeats", repeats)
     pf = sysid.particle_filter(sysid.ModelFile(OSCILLATOR), pd.read_csv(oscillator_record),
-                               particles=2000, seed=3)
+                               particles=2000, seed=3, repeats=repeats)
     assert pf.loglik == summary["loglik"]
     assert pf.loglik_sd == summary["diagnostics"]["loglik_sd"]
+    assert pf.loglik_sd_method == summary["diagnostics"]["loglik_sd_method"]
+    assert pf.loglik_sd_method == ("single-run" if repeats == 0 else "repeats")
+    assert pf.loglik_sd_single_run == summary["diagnostics"]["loglik_sd_single_run"]
     assert pf.repeat_logliks == summary["diagnostics"]["repeat_logliks"]
+    assert len(pf.repeat_logliks) == repeats
     assert pf.min_ess == summary["diagnostics"]["min_ess"]
     assert pf.warnings == summary["warnings"]
 

@@ -46,7 +46,9 @@ mod vexp;
 pub mod weights;
 
 pub use conditional::{ConditionalSmc, CsmcKernel, CsmcSummary};
-pub use diagnostics::{FilterDiagnostics, FilterWarning, LOST_FRACTION, LOST_STEPS, SD_LIMIT};
+pub use diagnostics::{
+    FilterDiagnostics, FilterWarning, LOST_FRACTION, LOST_STEPS, LoglikSdMethod, SD_LIMIT,
+};
 pub use error::{ModelError, SmcError};
 pub use filter::{FilterOptions, FilterSummary, ParticleFilter};
 pub use guided::GuidedFilter;
@@ -63,5 +65,6 @@ pub use smoother::{
     Tanizaki, Trajectories,
 };
 pub use streams::{Rng, stream};
+pub use variance::VARIANCE_SPAN;
 pub use vexp::{exp_shifted_sum, exp_shifted_sum_portable};
 pub use weights::normalise_log_weights;

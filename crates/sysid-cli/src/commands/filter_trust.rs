@@ -1,10 +1,12 @@
 //! How far to trust a particle filter's result: the library's
-//! [`FilterDiagnostics`] (log-likelihood sd from repeats, the smallest ESS, a lost
-//! state), with the steps named by the data file's times.
+//! [`FilterDiagnostics`] (log-likelihood sd from the run's genealogy or from repeats,
+//! the smallest ESS, a lost state), with the steps named by the data file's times.
 
 use crate::files::fmt;
 use serde_json::json;
-use sysid::smc::{FilterDiagnostics, FilterModel, ParticleFilter, Series};
+use sysid::smc::{
+    FilterDiagnostics, FilterModel, FilterSummary, LoglikSdMethod, ParticleFilter, Series,
+};
 
 /// The diagnostics of one filter run, with the warnings as printed.
 pub(crate) struct FilterTrust {
@@ -15,9 +17,23 @@ pub(crate) struct FilterTrust {
 }
 
 impl FilterTrust {
-    /// Sample sd of the log-likelihood estimates (None without repeats).
-    pub fn loglik_sd(&self) -> Option<f64> {
-        self.diagnostics.loglik_sd
+    /// The log-likelihood sd as the summary line gives it: `, sd 1.4 (single run)`,
+    /// or `, sd 1.6 over 10 runs (single-run 1.4)` with repeats; empty without either.
+    pub fn describe_sd(&self, repeats: usize) -> String {
+        let d = &self.diagnostics;
+        match (d.loglik_sd, d.loglik_sd_method) {
+            (Some(sd), Some(LoglikSdMethod::SingleRun)) => {
+                format!(", sd {} (single run)", fmt(sd))
+            }
+            (Some(sd), Some(LoglikSdMethod::Repeats)) => {
+                let single = d
+                    .loglik_sd_single_run
+                    .map(|s| format!(" (single-run {})", fmt(s)))
+                    .unwrap_or_default();
+                format!(", sd {} over {} runs{single}", fmt(sd), repeats + 1)
+            }
+            _ => String::new(),
+        }
     }
 
     /// Smallest ESS of the run and the step (0-based) where it happened.
@@ -29,7 +45,8 @@ impl FilterTrust {
     pub fn json(&self) -> serde_json::Value {
         let d = &self.diagnostics;
         json!({
-            "loglik_sd": d.loglik_sd, "repeats": d.repeat_logliks.len(),
+            "loglik_sd": d.loglik_sd, "loglik_sd_method": d.loglik_sd_method.map(|m| m.name()),
+            "loglik_sd_single_run": d.loglik_sd_single_run, "repeats": d.repeat_logliks.len(),
             "repeat_logliks": d.repeat_logliks,
             "min_ess": d.min_ess.map(|(e, _)| e), "min_ess_step": d.min_ess.map(|(_, t)| t),
             "warnings": self.warnings,
@@ -37,7 +54,7 @@ impl FilterTrust {
     }
 }
 
-/// Diagnoses the run of `pf` (log-likelihood `loglik`) with `repeats` more
+/// Diagnoses the run of `pf` (summary `run`) with `repeats` more
 /// filters on streams derived from `seed`. `time` names the steps in the
 /// messages (the data file's time; row numbers without one); `progress` advances by
 /// one per repeat.
@@ -45,13 +62,13 @@ pub(crate) fn diagnose<M: FilterModel + Sync>(
     model: &M,
     series: &Series<'_>,
     pf: &ParticleFilter,
-    loglik: f64,
+    run: &FilterSummary,
     (seed, repeats): (u64, usize),
     time: &[f64],
     progress: &crate::progress::Progress,
 ) -> FilterTrust {
     let diagnostics =
-        FilterDiagnostics::diagnose(model, series, pf, loglik, seed, repeats, || progress.inc(1));
+        FilterDiagnostics::diagnose(model, series, pf, run, seed, repeats, || progress.inc(1));
     let time_label = |t: usize| time.get(t).map_or_else(|| (t + 1).to_string(), |v| fmt(*v));
     let warnings = diagnostics
         .warnings

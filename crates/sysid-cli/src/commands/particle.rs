@@ -39,9 +39,11 @@ pub struct ParticleArgs {
     /// Seed of the random streams.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Independent repeats of the filter that give the Monte Carlo sd of the
-    /// log-likelihood estimate (a warning above 1.5 nats); 0 skips them.
-    #[arg(long, default_value_t = 9)]
+    /// Independent repeats of the filter for the Monte Carlo sd of the log-likelihood
+    /// estimate (a warning above 1.5 nats). 0, the default, takes the sd from the
+    /// run's own genealogy instead (one filter's cost; 10-17 % low in the measured
+    /// cases, and blind to rare losses of the state, which repeats can see).
+    #[arg(long, default_value_t = 0)]
     pub repeats: usize,
     /// Output CSV file.
     #[arg(long)]
@@ -111,10 +113,6 @@ fn smc_error(context: &str) -> impl Fn(SmcError) -> CliError + '_ {
     }
 }
 
-/// Spans of the single-run variance estimate of `sysid pf` (2 steps: the measured
-/// best on lgss and nlbench, docs in sysid_smc's variance.rs).
-const SINGLE_RUN_SPAN: usize = 2;
-
 /// The most repeats `--repeats` takes: the sd of 1001 runs is known to 2 %.
 const MAX_REPEATS: usize = 1000;
 
@@ -145,7 +143,8 @@ fn filter_options(a: &ParticleArgs, store_history: bool) -> Result<FilterOptions
         parallel: crate::threads() > 1,
         share_busy_processors: false,
         record_summaries: true,
-        variance_block: None,
+        // the single-run estimate of the log-likelihood's sd (sysid_smc's variance.rs)
+        variance_block: Some(sysid::smc::VARIANCE_SPAN),
     };
     options.check().map_err(option_error)?;
     Ok(options)
@@ -290,11 +289,7 @@ fn filter_with<M: FilterModel + Sync>(
     model: &M,
     columns: Columns,
 ) -> Result<(), CliError> {
-    let options = FilterOptions {
-        // the single-run estimate of the log-likelihood's sd (sysid_smc's variance.rs)
-        variance_block: Some(SINGLE_RUN_SPAN),
-        ..filter_options(a, false)?
-    };
+    let options = filter_options(a, false)?;
     let names = state_names(&columns, model.state_dim());
     let file = read_series(a, columns)?;
     // particles and their copy, weights, log-weights and ancestors; the filtered
@@ -319,7 +314,7 @@ fn filter_with<M: FilterModel + Sync>(
         model,
         &series,
         &pf,
-        run.loglik,
+        &run,
         (a.seed, a.repeats),
         &file.time,
         &progress,
@@ -337,20 +332,13 @@ fn filter_with<M: FilterModel + Sync>(
         });
         crate::say(&s.to_string());
     } else {
-        let sd = trust
-            .loglik_sd()
-            .map(|sd| format!(", sd {} over {} runs", fmt(sd), a.repeats + 1))
-            .unwrap_or_default();
+        let sd = trust.describe_sd(a.repeats);
         let ess = trust
             .min_ess()
             .map(|(e, t)| format!("; smallest ESS {e:.1} at step {}", t + 1))
             .unwrap_or_default();
-        let single = run
-            .loglik_variance
-            .map(|v| format!(", single-run sd {}", fmt(v.sqrt())))
-            .unwrap_or_default();
         crate::say(&format!(
-            "loglik estimate {}{sd}{single} ({} particles, resampled at {} of {} steps{ess})",
+            "loglik estimate {}{sd} ({} particles, resampled at {} of {} steps{ess})",
             run.loglik,
             a.particles,
             run.resampled_steps,
@@ -474,7 +462,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         model,
         &series,
         &pf,
-        run.loglik,
+        &run,
         (c.seed, c.repeats),
         &file.time,
         &progress,
@@ -493,10 +481,7 @@ fn smooth_with<M: FilterModel + TransitionBound + Sync>(
         });
         crate::say(&s.to_string());
     } else {
-        let sd = trust
-            .loglik_sd()
-            .map(|sd| format!(" (sd {} over {} runs)", fmt(sd), c.repeats + 1))
-            .unwrap_or_default();
+        let sd = trust.describe_sd(c.repeats);
         crate::say(&format!(
             "{}: {} paths from {} particles; filter loglik estimate {}{sd}",
             a.method,

@@ -273,25 +273,31 @@ pub(crate) fn threads() -> usize {
 
 fn run(cli: Cli) -> Result<(), CliError> {
     progress::set_quiet(cli.quiet);
-    if let Some(threads) = cli.threads {
-        if threads == 0 {
+    // rayon's own count (RAYON_NUM_THREADS or the processors) without --threads
+    let mut threads = 0;
+    if let Some(asked) = cli.threads {
+        if asked == 0 {
             return Err(CliError::BadOption {
                 option: "--threads",
                 message: "must be at least 1".into(),
             });
         }
-        let (threads, capped) = resources::capped_threads(threads);
+        let (capped_count, capped) = resources::capped_threads(asked);
         if let Some(note) = capped {
             warn(&note);
         }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build_global()
-            .map_err(|e| CliError::BadOption {
-                option: "--threads",
-                message: e.to_string(),
-            })?;
+        threads = capped_count;
     }
+    // workers evaluate model files' expression trees, whose deepest allowed form needs
+    // more than the default 2 MiB in a release build
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .stack_size(sysid::modelfile::expr::STACK_BYTES)
+        .build_global()
+        .map_err(|e| CliError::BadOption {
+            option: "--threads",
+            message: e.to_string(),
+        })?;
     match cli.command {
         None => commands::demo::run(&commands::demo::Options::default()),
         Some(Command::Demo(options)) => commands::demo::run(&options),

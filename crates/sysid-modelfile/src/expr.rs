@@ -619,6 +619,14 @@ pub const MAX_DEPTH: usize = 200;
 /// stack, where the nesting check, which counts parentheses, saw nothing.
 pub const MAX_CHAIN: usize = 1000;
 
+/// Stack a thread needs to parse, differentiate and evaluate the deepest expression
+/// allowed ([`MAX_DEPTH`], [`MAX_CHAIN`]) by the tree's recursive passes: measured
+/// between 1 and 2 MiB in a release build (1 MiB overflows), 1 MiB in the tests'
+/// profile; this has a margin of 8. Rust's spawned threads and rayon's workers get
+/// 2 MiB by default, so `sysid` and the Python package build their rayon pools with
+/// this much; a program that evaluates model files on its own threads should too.
+pub const STACK_BYTES: usize = 16 << 20;
+
 struct Parser<'a, 'n> {
     lexer: Lexer<'a>,
     names: &'n dyn Fn(&str) -> Option<Var>,
@@ -923,7 +931,8 @@ mod tests {
     /// A long sum is a deep tree: 70 000 terms overflowed the stack of every later
     /// pass; it is refused, and the deepest expression allowed (a sum of 1000 products
     /// inside 199 parentheses) parses, evaluates and differentiates on a thread with
-    /// half the stack of a worker thread (1 MB).
+    /// an eighth of [`STACK_BYTES`] (2 MiB, where a release build needs between 1 and 2
+    /// MiB and this profile 1).
     #[test]
     fn a_long_chain_of_operations_is_an_error_not_a_stack_overflow() {
         let long = vec!["a*x"; 70_000].join(" + ");
@@ -954,7 +963,7 @@ mod tests {
             ")".repeat(199)
         );
         std::thread::Builder::new()
-            .stack_size(1024 * 1024)
+            .stack_size(STACK_BYTES / 8)
             .spawn(move || {
                 let e = parse(&fine, &names).unwrap();
                 let lookup = |v: Var| match v {

@@ -21,6 +21,12 @@ use pyo3::prelude::*;
 #[pymodule]
 fn _sysid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // the global pool's workers evaluate model files' expression trees, whose deepest
+    // allowed form needs more than rayon's default 2 MiB in a release build (a second
+    // import in the same process finds the pool built: nothing to do)
+    let _ = rayon::ThreadPoolBuilder::new()
+        .stack_size(sysid::modelfile::expr::STACK_BYTES)
+        .build_global();
     linear::register(m)?;
     particle::register(m)?;
     simulation::register(m)?;

@@ -125,6 +125,7 @@ fn pool(threads: Option<usize>) -> PyResult<Option<rayon::ThreadPool>> {
         Some(0) => Err(crate::errors::Failure::option("threads", "must be at least 1").into()),
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
+            .stack_size(sysid::modelfile::expr::STACK_BYTES)
             .build()
             .map(Some)
             .map_err(|e| PyRuntimeError::new_err(format!("cannot start {n} threads: {e}"))),

@@ -247,7 +247,8 @@ fn option_failure(e: &sysid::smc::SmcError) -> Failure {
 /// `sysid fit --model`: the estimates, the fitted file's text, and the run's report.
 #[pyfunction]
 #[pyo3(signature = (model, y, u=None, method="robust", particles=100, smoother="tanizaki",
-    iterations=500, starts=8, seed=1, progress=None, threads=None, polish=true))]
+    iterations=500, starts=8, seed=1, progress=None, threads=None, polish=true,
+    extrapolate=true))]
 #[allow(clippy::too_many_arguments)]
 fn fit_model<'py>(
     py: Python<'py>,
@@ -263,6 +264,7 @@ fn fit_model<'py>(
     progress: Option<Bound<'py, PyAny>>,
     threads: Option<usize>,
     polish: bool,
+    extrapolate: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let chosen = AffineMethod::from_name(method).ok_or_else(|| {
         Failure::option(
@@ -284,6 +286,7 @@ fn fit_model<'py>(
     if !polish {
         options.polish_particles = 0;
     }
+    options.extrapolate = extrapolate;
     let options = options.check().map_err(|e| match e {
         sysid::em::affine::AffineEmError::InvalidOption { name, reason } => {
             Failure::option(name, reason)

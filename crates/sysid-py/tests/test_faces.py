@@ -141,6 +141,21 @@ def test_fit_of_a_model_file_equals_the_command(tmp_path, oscillator_record):
     assert res.llf == summary.get("loglik_estimate", summary.get("loglik"))
 
 
+@pytest.mark.parametrize("extrapolate", [True, False])
+def test_fit_extrapolate_equals_the_command_s(tmp_path, oscillator_record, extrapolate):
+    # 80 iterations: the first jump is due at 50, within the first three quarters
+    out = tmp_path / "fit.toml"
+    summary = cli_json("fit", "--model", OSCILLATOR, "--data", oscillator_record,
+                       "--max-iter", 80, "--starts", 2, "--extrapolate",
+                       "on" if extrapolate else "off", "--out", out)
+    res = sysid.fit(OSCILLATOR, pd.read_csv(oscillator_record), max_iter=80, starts=2,
+                    extrapolate=extrapolate, strict=False)
+    written = sysid.ModelFile(out)
+    for name, value in written.params.items():
+        assert res.params[name] == pytest.approx(value, rel=1e-12, abs=0)
+    assert (summary["refinement"]["jumps_tried"] > 0) == extrapolate
+
+
 def test_pmmh_draws_equal_the_command_s(tmp_path, oscillator_record):
     out = tmp_path / "chains.json"
     fitted = tmp_path / "osc.toml"

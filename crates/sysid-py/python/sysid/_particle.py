@@ -248,7 +248,8 @@ class SimulationFitResults:
 
 def fit(model, data, u=None, *, criterion="likelihood", method="robust", particles=100,
         smoother="tanizaki", max_iter=500, starts=8, seed=1, spread=0.3, patience=100,
-        time=None, progress=None, threads=None, strict=False, polish=True):
+        time=None, progress=None, threads=None, strict=False, polish=True,
+        extrapolate=True):
     """``sysid fit --model``. ``criterion="likelihood"`` (the default): maximum
     likelihood for a model file's free parameters, by the method the command line
     chooses: closed-form particle EM when the equations are affine in them (``method``
@@ -257,7 +258,10 @@ def fit(model, data, u=None, *, criterion="likelihood", method="robust", particl
     initial state (Levenberg-Marquardt from the file's values and ``starts - 1``
     perturbations, each value times ``exp(spread N(0, 1))``); returns
     ``SimulationFitResults``. ``polish`` (robust method): maximise a 10 000-particle
-    likelihood directly from the EM estimate (``--polish off`` is ``polish=False``)."""
+    likelihood directly from the EM estimate (``--polish off`` is ``polish=False``).
+    ``extrapolate`` (robust method): the refinement jumps along its own drift every 25
+    iterations, a jump kept only when the ranking filter gains a nat (``--extrapolate
+    off`` is ``extrapolate=False``)."""
     model = _model(model)
     s = model._signals(data, u, time)
     if criterion == "simulation":
@@ -270,7 +274,8 @@ def fit(model, data, u=None, *, criterion="likelihood", method="robust", particl
                           "criterion")
     with partial_as(lambda raw: ModelFitResults(raw, model.origin)):
         raw = _sysid.fit_model(model._compiled, s.y, s.u, method, particles, smoother,
-                               max_iter, starts, seed, progress, threads, bool(polish))
+                               max_iter, starts, seed, progress, threads, bool(polish),
+                               bool(extrapolate))
     return report(ModelFitResults(raw, model.origin), strict, "fit")
 
 

@@ -3,6 +3,7 @@
 
 mod common;
 use common::{assert_one_line_error, s, scratch_dir, sysid};
+use std::path::{Path, PathBuf};
 
 fn ok(args: &[&str]) -> String {
     let out = sysid(args);
@@ -48,22 +49,26 @@ p = { mean = 0.5, variance = 0.01 }
 v = { mean = 0, variance = 0.01 }
 "#;
 
-#[test]
-fn a_model_file_goes_through_every_nonlinear_command() {
-    let dir = scratch_dir();
+/// The oscillator written as `osc.toml` in `dir` and a record of it, `osc.csv`, of
+/// `steps` steps (with the true states when `states`).
+fn oscillator_record(dir: &Path, steps: usize, states: bool) -> (PathBuf, PathBuf) {
     let model = dir.join("osc.toml");
     std::fs::write(&model, OSCILLATOR).unwrap();
     let data = dir.join("osc.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        s(&model),
-        "--steps",
-        "300",
-        "--states",
-        "--out",
-        s(&data),
-    ]);
+    let steps = steps.to_string();
+    let mut args = vec!["simulate", "--model", s(&model), "--steps", &steps];
+    if states {
+        args.push("--states");
+    }
+    args.extend(["--out", s(&data)]);
+    ok(&args);
+    (model, data)
+}
+
+#[test]
+fn a_model_file_goes_through_every_nonlinear_command() {
+    let dir = scratch_dir();
+    let (model, data) = oscillator_record(&dir, 300, true);
     let header = std::fs::read_to_string(&data).unwrap();
     assert!(header.starts_with("t,y,p,v\n"), "{}", &header[..40]);
 
@@ -160,18 +165,7 @@ fn a_model_file_goes_through_every_nonlinear_command() {
 #[test]
 fn pgas_draws_an_affine_model_files_parameters_exactly() {
     let dir = scratch_dir();
-    let model = dir.join("osc.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
-    let data = dir.join("osc.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        s(&model),
-        "--steps",
-        "200",
-        "--out",
-        s(&data),
-    ]);
+    let (model, data) = oscillator_record(&dir, 200, false);
     let run = |model: &std::path::Path, step: Option<&str>| {
         let mut args = vec![
             "pgas",
@@ -511,18 +505,7 @@ fn ctrl_c_keeps_what_a_long_run_has() {
 #[test]
 fn extrapolate_off_runs_plain_em_in_the_refinement() {
     let dir = scratch_dir();
-    let model = dir.join("osc.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
-    let data = dir.join("osc.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        s(&model),
-        "--steps",
-        "150",
-        "--out",
-        s(&data),
-    ]);
+    let (model, data) = oscillator_record(&dir, 150, false);
     let jumps = |extrapolate: Option<&str>| {
         let out = dir.join("fit.toml");
         let mut args = vec![
@@ -627,19 +610,8 @@ fn each_fit_class_help_lists_only_its_own_options() {
 #[test]
 fn smoothed_states_keep_the_model_s_names_and_plot_draws_their_truth() {
     let dir = scratch_dir();
-    let model = dir.join("osc.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
-    let (data, smoothed, filtered) = (dir.join("osc.csv"), dir.join("sm.csv"), dir.join("pf.csv"));
-    ok(&[
-        "simulate",
-        "--model",
-        s(&model),
-        "--steps",
-        "200",
-        "--states",
-        "--out",
-        s(&data),
-    ]);
+    let (model, data) = oscillator_record(&dir, 200, true);
+    let (smoothed, filtered) = (dir.join("sm.csv"), dir.join("pf.csv"));
     let truth_header = std::fs::read_to_string(&data).unwrap();
     let truth_header = truth_header.lines().next().unwrap().to_string();
     ok(&[
@@ -701,18 +673,7 @@ fn smoothed_states_keep_the_model_s_names_and_plot_draws_their_truth() {
 #[test]
 fn a_bad_cell_in_a_named_column_is_named() {
     let dir = scratch_dir();
-    let model = dir.join("osc.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
-    let data = dir.join("osc.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        s(&model),
-        "--steps",
-        "20",
-        "--out",
-        s(&data),
-    ]);
+    let (model, data) = oscillator_record(&dir, 20, false);
     let text = std::fs::read_to_string(&data).unwrap();
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
     let mut cells: Vec<&str> = lines[5].split(',').collect();
@@ -730,18 +691,7 @@ fn long_fits_say_how_far_they_got_in_a_log() {
     // stderr is a pipe here, as in a batch job: no bar, plain lines at the interval
     // (SYSID_PROGRESS_SECONDS, 30 s by default; 0 here: a line at every tick)
     let dir = scratch_dir();
-    let model = dir.join("osc.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
-    let data = dir.join("osc.csv");
-    ok(&[
-        "simulate",
-        "--model",
-        s(&model),
-        "--steps",
-        "100",
-        "--out",
-        s(&data),
-    ]);
+    let (model, data) = oscillator_record(&dir, 100, false);
     let fit = |method: &str, model_text: &str, interval: &str| {
         std::fs::write(&model, model_text).unwrap();
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))

@@ -144,8 +144,8 @@ impl GenealogyVariance {
         }
     }
 
-    /// After the resampling decision of step `t`: every span follows the ancestors of
-    /// the next step's particles.
+    /// After the resampling decision of step `t`: the newest span follows the
+    /// ancestors of the next step's particles.
     pub(crate) fn advance(&mut self, ancestors: &[usize]) {
         // the newest span only (the older one is frozen while a newer exists)
         if let Some(span) = self.new.as_mut().or(self.old.as_mut()) {
@@ -204,7 +204,7 @@ fn sorted_squares(eve: &[u32], weights: &[f64]) -> Option<f64> {
     let m = eve.len().min(weights.len());
     let width = m / LANES;
     if width < 16 {
-        let lane = Lane::over(eve, weights, 0, m);
+        let lane = Lane::over(&eve[..m], &weights[..m]);
         return (!lane.unsorted).then_some(lane.squares + lane.run * lane.run);
     }
     let starts: [usize; LANES] = std::array::from_fn(|l| l * width);
@@ -280,10 +280,11 @@ impl Lane {
         }
     }
 
-    fn over(eve: &[u32], weights: &[f64], from: usize, to: usize) -> Lane {
-        let mut lane = Lane::start(eve.get(from).copied().unwrap_or(0));
-        for i in from..to {
-            lane.push(eve[i], weights[i]);
+    /// One lane over all of `eve` (the short case).
+    fn over(eve: &[u32], weights: &[f64]) -> Lane {
+        let mut lane = Lane::start(eve.first().copied().unwrap_or(0));
+        for (&e, &w) in eve.iter().zip(weights) {
+            lane.push(e, w);
         }
         lane
     }

@@ -82,6 +82,7 @@ fn fit_model_file_equals_the_library_for_each_method() {
         (oscillator(), "robust", AffineMethod::Robust),
         (oscillator(), "em", AffineMethod::Em),
         (product.clone(), "em", AffineMethod::Em),
+        (product.clone(), "robust", AffineMethod::Robust),
     ];
     for (path, method, chosen) in cases {
         let out = dir.join("fit.toml");
@@ -130,8 +131,13 @@ fn fit_model_file_equals_the_library_for_each_method() {
         if let Some(cli) = summary.get("warnings") {
             assert_eq!(cli, &serde_json::json!(warnings), "{what}");
         }
-        let gradient = path == product;
-        assert_eq!(fit.method(), if gradient { "gradient-em" } else { method });
+        // a file that is not affine: gradient EM for em, the direct fit for robust
+        let expected = match (path == product, method) {
+            (true, "em") => "gradient-em",
+            (true, _) => "direct",
+            (false, _) => method,
+        };
+        assert_eq!(fit.method(), expected, "{what}");
     }
 }
 

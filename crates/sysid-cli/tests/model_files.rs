@@ -215,7 +215,7 @@ fn pgas_draws_an_affine_model_files_parameters_exactly() {
 }
 
 #[test]
-fn a_non_affine_model_file_is_fitted_by_gradient_em() {
+fn a_non_affine_model_file_is_fitted_directly_or_by_gradient_em() {
     let dir = scratch_dir();
     let model = dir.join("osc.toml");
     // k*c: a product of parameters
@@ -231,20 +231,36 @@ fn a_non_affine_model_file_is_fitted_by_gradient_em() {
         s(&data),
     ]);
     let fitted = dir.join("fit.toml");
-    let report = json(&[
-        "fit",
-        "--model",
-        s(&model),
-        "--data",
-        s(&data),
-        "--max-iter",
-        "8",
-        "--particles",
-        "50",
-        "--out",
-        s(&fitted),
-        "--json",
-    ]);
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit",
+            "--model",
+            s(&model),
+            "--data",
+            s(&data),
+            "--particles",
+            "50",
+            "--out",
+            s(&fitted),
+            "--force",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        json(&args)
+    };
+    // the default: the likelihood maximised from several starts, with standard errors
+    let report = fit(&["--starts", "3"]);
+    assert_eq!(report["method"], "direct");
+    assert_eq!(report["starts"].as_array().unwrap().len(), 3);
+    assert_eq!(report["starts"][1]["origin"], "simulation-error fit");
+    let written = sysid::modelfile::ModelFile::read(&fitted).unwrap();
+    let se = &report["standard_errors"];
+    for (name, value) in written.free_names().iter().zip(written.free_values()) {
+        assert_eq!(report["estimate"][name].as_f64(), Some(value));
+        assert!(se[name].as_f64().is_some_and(|v| v > 0.0), "{report}");
+    }
+    // --method em: gradient EM from the file's values
+    let report = fit(&["--method", "em", "--max-iter", "8"]);
     assert_eq!(report["method"], "gradient-em");
     assert!(sysid::modelfile::ModelFile::read(&fitted).is_ok());
 }

@@ -1,12 +1,15 @@
 //! Fitting a model file's free parameters: closed-form particle EM when the equations
-//! are affine in them (the robust driver by default, or plain EM, or PSAEM), gradient
-//! EM otherwise, with the report and the warnings the method gives.
+//! are affine in them (the robust driver by default, or plain EM, or PSAEM); otherwise
+//! the multi-start direct maximum-likelihood fit by default (`direct.rs`) or gradient
+//! EM from the file's values (`em`), with the report and the warnings the method gives.
 
 use crate::{ExprAffine, ModelFile};
 use sysid_em::affine::{
     AffineEmError, AffineFit, AffineMethod, CheckedAffineFitOptions, fit_affine,
 };
-use sysid_em::gradient::{GradientEm, GradientEmError, GradientModel, MStepOptions};
+use sysid_em::gradient::{
+    DirectFit, DirectWarning, GradientEm, GradientEmError, GradientModel, MStepOptions,
+};
 use sysid_em::{EmObserver, EmResult, FitRun, IterationInfo, Termination, run_em};
 use sysid_smc::{FfbsiReject, ModelError, Series};
 
@@ -16,6 +19,14 @@ pub enum FileFitReport {
     /// Closed-form particle EM ([`fit_affine`]); estimates as the file's free values
     /// through [`ExprAffine::theta`].
     Affine(AffineFit),
+    /// The multi-start direct maximum-likelihood fit of a file that is not affine
+    /// ([`sysid_em::gradient::fit_direct`]); its vectors are on the unconstrained scale.
+    Direct {
+        /// The fit.
+        fit: DirectFit,
+        /// The start that is the simulation-error fit's estimate, if it could be made.
+        simulation_start: Option<usize>,
+    },
     /// Gradient EM with rejection FFBSi (`particles` paths) and analytic gradients.
     Gradient {
         /// The runner's result; its estimate is on the unconstrained scale.
@@ -39,20 +50,33 @@ pub struct FileFit {
 }
 
 impl FileFit {
-    /// The method's name: `robust`, `em`, `psaem` or `gradient-em`.
+    /// The method's name: `robust`, `em`, `psaem`, `direct` or `gradient-em`.
     pub fn method(&self) -> &'static str {
         match &self.report {
             FileFitReport::Affine(fit) => fit.method.name(),
+            FileFitReport::Direct { .. } => "direct",
             FileFitReport::Gradient { .. } => "gradient-em",
         }
     }
 
-    /// The estimate's log-likelihood estimate (see [`AffineFit::loglik`]; for gradient
-    /// EM the last E-step's).
+    /// The estimate's log-likelihood estimate (see [`AffineFit::loglik`]; for the
+    /// direct fit the mean of independent filters at the estimate; for gradient EM the
+    /// last E-step's).
     pub fn loglik(&self) -> Option<f64> {
         match &self.report {
             FileFitReport::Affine(fit) => fit.loglik(),
+            FileFitReport::Direct { fit, .. } => Some(fit.loglik),
             FileFitReport::Gradient { result, .. } => result.loglik,
+        }
+    }
+
+    /// Standard errors of the estimates, in the order of [`ModelFile::free_names`],
+    /// where the method gives them (the direct fit, from its finishing filter's
+    /// curvature; `None` otherwise).
+    pub fn standard_errors(&self) -> Option<&[f64]> {
+        match &self.report {
+            FileFitReport::Direct { fit, .. } => fit.standard_errors.as_deref(),
+            _ => None,
         }
     }
 
@@ -60,6 +84,7 @@ impl FileFit {
     pub fn interrupted(&self) -> bool {
         match &self.report {
             FileFitReport::Affine(fit) => fit.interrupted(),
+            FileFitReport::Direct { fit, .. } => fit.interrupted,
             FileFitReport::Gradient { result, .. } => {
                 matches!(result.termination, Termination::Interrupted { .. })
             }
@@ -73,6 +98,8 @@ impl FileFit {
 pub enum FileFitWarning {
     /// A warning of the robust driver (its text).
     Robust(String),
+    /// A warning of the direct fit of a file that is not affine.
+    Direct(DirectWarning),
     /// Too few iterations to judge whether the iterates have settled.
     TooFewIterations {
         /// Iterations made.
@@ -124,6 +151,7 @@ impl std::fmt::Display for FileFitWarning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             FileFitWarning::Robust(text) => f.write_str(text),
+            FileFitWarning::Direct(w) => w.fmt(f),
             FileFitWarning::TooFewIterations { iterations } => write!(
                 f,
                 "only {iterations} EM iterations: too few to tell whether the estimate has \
@@ -184,7 +212,7 @@ pub enum FileFitError {
     /// is not affine in its parameters).
     #[error(
         "{method:?}: {origin} is not affine in its free parameters ({why}), so it is fitted \
-         by gradient EM; use --method em"
+         by its likelihood from several starts (robust) or by gradient EM (em)"
     )]
     NotAffine {
         /// The method asked for.
@@ -247,10 +275,14 @@ impl<T, F: Fn(&T) -> Vec<f64>> EmObserver<T> for Values<'_, '_, F> {
 impl ModelFile {
     /// Fits the free parameters to `data` from their values in the file: closed-form
     /// particle EM by the method of `options` when the equations are affine in them
-    /// ([`fit_affine`], with the file's own choice of free noise blocks), gradient EM
-    /// otherwise (rejection FFBSi with `particles` paths, analytic gradients; the
-    /// methods `robust` and `em` both mean it). `observer` sees the free values after
-    /// every EM iteration; `run` gives the seed and the stop.
+    /// ([`fit_affine`], with the file's own choice of free noise blocks), otherwise
+    /// `robust` (the default) is the multi-start direct maximum-likelihood fit
+    /// ([`sysid_em::gradient::fit_direct`]: `starts` starts, each free value of the
+    /// file times `U[0.5, 1.5]`, explored by a 1000-particle filter, the best finished
+    /// by a `polish_particles` one) and `em` is gradient EM from the file's values
+    /// (rejection FFBSi with `particles` paths, analytic gradients). `observer` sees
+    /// the free values after every EM iteration (the direct fit has none); `run` gives
+    /// the seed and the stop.
     ///
     /// # Errors
     /// [`FileFitError::NothingFree`]; [`FileFitError::NotAffine`] for PSAEM on a model
@@ -270,6 +302,9 @@ impl ModelFile {
         }
         let mut fit = match self.affine() {
             Some(affine) => self.fit_affine(&affine, data, options, run, observer),
+            None if options.options().method == AffineMethod::Robust => {
+                self.fit_direct(data, options, run)
+            }
             None => self.fit_gradient(data, options, run, observer),
         }?;
         if let Some(found) = fit.fitted.inseparable_on(data) {

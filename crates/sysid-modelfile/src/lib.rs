@@ -65,6 +65,7 @@
 pub mod affine;
 pub mod builtin;
 pub mod conjugate;
+mod direct;
 pub mod expr;
 mod fit;
 pub mod gaussian;

@@ -547,18 +547,8 @@ impl ModelFile {
                 ratio: found.ratio,
             });
         }
-        for (&k, s) in params.iter().zip(&supports) {
-            if let Support::Interval(low, high) = *s {
-                let v = values[k];
-                let near = 1e-6 * (high - low);
-                if v - low < near || high - v < near {
-                    warnings.push(FileFitWarning::AtBound {
-                        name: spec.parameters[k].name.clone(),
-                        value: v,
-                        bound: if v - low < near { low } else { high },
-                    });
-                }
-            }
+        for (&k, &s) in params.iter().zip(&supports) {
+            warnings.extend(at_bound(&spec.parameters[k].name, values[k], s));
         }
         if !starts[best_run].converged && !interrupted {
             warnings.push(FileFitWarning::NotConverged {
@@ -587,8 +577,21 @@ impl ModelFile {
     }
 }
 
+/// The warning for a value within `1e-6` of the width of its interval from a bound.
+pub(crate) fn at_bound(name: &str, value: f64, support: Support) -> Option<FileFitWarning> {
+    let Support::Interval(low, high) = support else {
+        return None;
+    };
+    let near = 1e-6 * (high - low);
+    (value - low < near || high - value < near).then(|| FileFitWarning::AtBound {
+        name: name.to_string(),
+        value,
+        bound: if value - low < near { low } else { high },
+    })
+}
+
 /// Moves an unconstrained coordinate by `step` on the log scale of its parameter.
-fn perturb(z: &mut f64, support: Support, step: f64) {
+pub(crate) fn perturb(z: &mut f64, support: Support, step: f64) {
     match support {
         // a real parameter: times exp(step), its sign kept (0 stays 0)
         Support::Real => *z *= step.exp(),

@@ -283,7 +283,8 @@ x = { mean = 2, variance = 0.1 }
     let y: Vec<f64> = (0..30)
         .map(|t| 2.0 + 0.1 * ((t as f64) * 0.9).sin())
         .collect();
-    let mut options = sysid_em::affine::AffineFitOptions::default();
+    let mut options = sysid_em::affine::AffineFitOptions::default()
+        .with_method(sysid_em::affine::AffineMethod::Em);
     options.particles = 20;
     options.iterations = 3;
     let options = options.check().unwrap();

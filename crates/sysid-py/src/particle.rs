@@ -320,6 +320,10 @@ fn fit_model<'py>(
     out.set_item("estimate", fit.estimate.clone())?;
     out.set_item("loglik", fit.loglik())?;
     out.set_item("interrupted", fit.interrupted())?;
+    out.set_item(
+        "standard_errors",
+        fit.standard_errors().map(<[f64]>::to_vec),
+    )?;
     let warnings: Vec<String> = fit.warnings.iter().map(ToString::to_string).collect();
     out.set_item("warnings", warnings)?;
     let metadata = vec![

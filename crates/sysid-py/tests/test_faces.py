@@ -141,6 +141,24 @@ def test_fit_of_a_model_file_equals_the_command(tmp_path, oscillator_record):
     assert res.llf == summary.get("loglik_estimate", summary.get("loglik"))
 
 
+def test_direct_fit_of_a_file_that_is_not_affine_equals_the_command(tmp_path,
+                                                                  oscillator_record):
+    product = tmp_path / "product.toml"
+    product.write_text(OSCILLATOR.read_text().replace("c*v", "k*c*v"))
+    out = tmp_path / "fit.toml"
+    summary = cli_json("fit", "--model", product, "--data", oscillator_record, "--starts", 2,
+                       "--polish", "off", "--seed", 4, "--out", out)
+    res = sysid.fit(product, pd.read_csv(oscillator_record), starts=2, polish=False, seed=4,
+                    strict=False)
+    written = sysid.ModelFile(out)
+    for name, value in written.params.items():
+        assert res.params[name] == pytest.approx(value, rel=1e-12, abs=0)
+    assert res.method == summary["method"] == "direct"
+    assert res.llf == summary["loglik_estimate"]
+    assert res.bse == summary.get("standard_errors")
+    assert res.warnings == summary["warnings"]
+
+
 @pytest.mark.parametrize("extrapolate", [True, False])
 def test_fit_extrapolate_equals_the_command_s(tmp_path, oscillator_record, extrapolate):
     # 80 iterations: the first jump is due at 50, within the first three quarters

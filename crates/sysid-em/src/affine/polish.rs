@@ -21,10 +21,10 @@
 //!    the E-step's bias;
 //! 2. Nelder–Mead (argmin 0.11) from there, with a simplex of 10 % of every
 //!    coefficient and a factor 1.35 on every variance, until the simplex's values agree
-//!    within [`SD_TOLERANCE`] nats or the evaluation budget is spent. The best point
+//!    within [`SD_TOLERANCE`](crate::likelihood_search::SD_TOLERANCE) nats or the evaluation budget is spent. The best point
 //!    evaluated is kept, whatever the solver's last state.
 //!
-//! The reported log-likelihood is the mean of [`REPEATS`] independent filters at the
+//! The reported log-likelihood is the mean of [`REPEATS`](crate::likelihood_search::REPEATS) independent filters at the
 //! result (not the common-random-numbers value it was selected on, which is biased
 //! upward by the selection), with their standard deviation.
 //!
@@ -36,33 +36,13 @@ use super::constraints::estimated_variances;
 use super::{
     AffineConstraints, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure,
 };
-use argmin::core::{CostFunction, Executor, State, TerminationReason, TerminationStatus};
-use argmin::solver::neldermead::NelderMead;
+use crate::likelihood_search::{Search, scored};
 use nalgebra::DMatrix;
-use rand::RngExt;
 use std::cell::RefCell;
-use sysid_smc::{FilterOptions, ParticleFilter, Series, stream};
+use sysid_smc::{FilterOptions, ParticleFilter, Series};
 
 /// Halvings (or doublings) of each noise variance before Nelder–Mead.
 pub const MAX_HALVINGS: usize = 6;
-
-/// Nelder–Mead stops when the standard deviation of the simplex's log-likelihoods is
-/// below this (nats).
-pub const SD_TOLERANCE: f64 = 0.02;
-
-/// The cost of a point not evaluated (invalid, or past the budget): worse than any
-/// valid point.
-const UNEVALUATED: f64 = f64::MAX / 4.0;
-
-/// Independent filters that score the result (mean and sd).
-pub const REPEATS: usize = 4;
-
-/// A gain (nats) smaller than this does not count as progress ...
-pub const STALL_GAIN: f64 = 0.1;
-
-/// ... and Nelder–Mead has stalled (converged, on a function with Monte Carlo
-/// roughness) after this many evaluations per vertex of its simplex without progress.
-pub const STALL_EVALUATIONS_PER_VERTEX: usize = 5;
 
 /// What the polish did.
 #[derive(Debug, Clone, PartialEq)]
@@ -218,79 +198,6 @@ fn at(
     params
 }
 
-/// The negative log-likelihood on common random numbers, with the best point seen.
-struct Objective<'a, A: AffineModel> {
-    model: &'a A,
-    constraints: Option<AffineConstraints>,
-    data: Series<'a>,
-    base: &'a AffineParams,
-    coordinates: &'a [Coordinate],
-    filter: RefCell<ParticleFilter>,
-    seed: u64,
-    stop: &'a dyn Fn() -> bool,
-    evaluations: RefCell<usize>,
-    best: RefCell<(Vec<f64>, f64)>,
-    /// The evaluation count and log-likelihood of the last gain over [`STALL_GAIN`].
-    progress: RefCell<(usize, f64)>,
-}
-
-impl<A: AffineModel> Objective<'_, A> {
-    /// The log-likelihood at `point` (`-inf` where the model is invalid or the filter
-    /// fails).
-    fn loglik(&self, point: &[f64], seed: u64) -> f64 {
-        let params = at(
-            self.base,
-            self.coordinates,
-            point,
-            self.constraints.as_ref(),
-        );
-        let Ok(smc) = self.model.smc_model(&params) else {
-            return f64::NEG_INFINITY;
-        };
-        match self.filter.borrow_mut().run(&smc, &self.data, seed) {
-            Ok(summary) if summary.loglik.is_finite() => summary.loglik,
-            _ => f64::NEG_INFINITY,
-        }
-    }
-
-    /// [`Self::loglik`] on the common seed, counted and remembered if best.
-    fn evaluate(&self, point: &[f64]) -> f64 {
-        *self.evaluations.borrow_mut() += 1;
-        let l = self.loglik(point, self.seed);
-        let mut progress = self.progress.borrow_mut();
-        if l > progress.1 + STALL_GAIN {
-            *progress = (*self.evaluations.borrow(), l);
-        }
-        let mut best = self.best.borrow_mut();
-        if l > best.1 {
-            *best = (point.to_vec(), l);
-        }
-        l
-    }
-
-    /// Mean and sd of `REPEATS` independent filters at `point`.
-    fn scored(&self, point: &[f64]) -> (f64, f64) {
-        let runs: Vec<f64> = (0..REPEATS)
-            .map(|k| self.loglik(point, stream(self.seed, k as u64 + 1).random()))
-            .collect();
-        let n = runs.len() as f64;
-        let mean = runs.iter().sum::<f64>() / n;
-        let var = runs.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / (n - 1.0);
-        (mean, var.sqrt())
-    }
-}
-
-impl<A: AffineModel> CostFunction for Objective<'_, A> {
-    type Param = Vec<f64>;
-    type Output = f64;
-
-    fn cost(&self, point: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        let l = self.evaluate(point);
-        // Nelder-Mead needs a finite order: an invalid point is worse than any valid one
-        Ok(if l.is_finite() { -l } else { UNEVALUATED })
-    }
-}
-
 /// Maximises the `particles`-particle log-likelihood over what `spec` estimates,
 /// from `start`, with at most `evaluations` Nelder–Mead evaluations; returns the best
 /// point and what happened (see the module docs).
@@ -316,22 +223,23 @@ pub(crate) fn polish<A: AffineModel>(
     })?;
     let coords = coordinates(model, start, spec);
     let constraints = model.constraints();
-    let objective = Objective {
-        model,
-        constraints: constraints.clone(),
-        data,
-        base: start,
-        coordinates: &coords,
-        filter: RefCell::new(filter),
-        seed,
-        stop,
-        evaluations: RefCell::new(0),
-        best: RefCell::new((Vec::new(), f64::NEG_INFINITY)),
-        progress: RefCell::new((0, f64::NEG_INFINITY)),
+    let filter = RefCell::new(filter);
+    // the log-likelihood at a point (`-inf` where the model is invalid or the filter fails)
+    let loglik = |point: &[f64], seed: u64| {
+        let params = at(start, &coords, point, constraints.as_ref());
+        let Ok(smc) = model.smc_model(&params) else {
+            return f64::NEG_INFINITY;
+        };
+        match filter.borrow_mut().run(&smc, &data, seed) {
+            Ok(summary) if summary.loglik.is_finite() => summary.loglik,
+            _ => f64::NEG_INFINITY,
+        }
     };
+    let common = |point: &[f64]| loglik(point, seed);
+    let search = Search::new(&common, stop);
     let origin = values(start, &coords, constraints.as_ref());
-    let (start_loglik, _) = objective.scored(&origin);
-    if !start_loglik.is_finite() || objective.evaluate(&origin) == f64::NEG_INFINITY {
+    let (start_loglik, _) = scored(&loglik, &origin, seed);
+    if !start_loglik.is_finite() || search.evaluate(&origin) == f64::NEG_INFINITY {
         return Err(AffineEmError::InvalidParams(format!(
             "robust EM: the estimate cannot be scored by a {particles}-particle filter"
         )));
@@ -347,9 +255,9 @@ pub(crate) fn polish<A: AffineModel>(
                 if stop() {
                     break;
                 }
-                let (mut point, current) = objective.best.borrow().clone();
+                let (mut point, current) = search.best();
                 point[k] += step;
-                if objective.evaluate(&point) <= current {
+                if search.evaluate(&point) <= current {
                     break;
                 }
                 moved = true;
@@ -360,48 +268,27 @@ pub(crate) fn polish<A: AffineModel>(
         }
     }
     // 2. Nelder-Mead from the best point so far
-    let (from, _) = objective.best.borrow().clone();
-    let mut simplex = vec![from.clone()];
-    for (k, c) in coords.iter().enumerate() {
-        let mut vertex = from.clone();
-        vertex[k] += if c.is_variance() {
-            0.3
-        } else if from[k] != 0.0 {
-            0.1 * from[k].abs()
-        } else {
-            0.1
-        };
-        simplex.push(vertex);
-    }
-    let mut converged = false;
-    if !coords.is_empty() && evaluations > 0 && !stop() {
-        let solver = NelderMead::new(simplex)
-            .with_sd_tolerance(SD_TOLERANCE)
-            .map_err(|e| AffineEmError::InvalidParams(e.to_string()))?;
-        let budget = *objective.evaluations.borrow() + evaluations;
-        // every iteration costs one to n + 2 evaluations: iterations bound loosely, the
-        // count of evaluations exactly (the cost refuses past the budget)
-        let budgeted = Budgeted {
-            inner: &objective,
-            budget,
-            stall: STALL_EVALUATIONS_PER_VERTEX * (coords.len() + 1),
-            stalled: RefCell::new(false),
-        };
-        let result = Executor::new(&budgeted, solver)
-            .configure(|s| s.max_iters(evaluations as u64))
-            .run();
-        converged = (*budgeted.stalled.borrow() && !stop())
-            || result.is_ok_and(|r| {
-                matches!(
-                    r.state().get_termination_status(),
-                    TerminationStatus::Terminated(TerminationReason::SolverConverged)
-                )
-            });
-    }
-    let (point, _) = objective.best.borrow().clone();
-    let (loglik, loglik_sd) = objective.scored(&point);
+    let (from, _) = search.best();
+    let steps: Vec<f64> = coords
+        .iter()
+        .zip(&from)
+        .map(|(c, &v)| {
+            if c.is_variance() {
+                0.3
+            } else if v != 0.0 {
+                0.1 * v.abs()
+            } else {
+                0.1
+            }
+        })
+        .collect();
+    let converged = search
+        .nelder_mead(&steps, evaluations)
+        .map_err(AffineEmError::InvalidParams)?;
+    let (point, _) = search.best();
+    let (loglik, loglik_sd) = scored(&loglik, &point, seed);
     let polished = at(start, &coords, &point, constraints.as_ref());
-    let evaluations = *objective.evaluations.borrow();
+    let evaluations = search.evaluations();
     Ok((
         polished,
         Polish {
@@ -414,32 +301,4 @@ pub(crate) fn polish<A: AffineModel>(
             interrupted: stop(),
         },
     ))
-}
-
-/// The objective, refusing to evaluate past a budget or after `stall` evaluations
-/// without progress (the run then ends with the best point seen).
-struct Budgeted<'a, 'b, A: AffineModel> {
-    inner: &'a Objective<'b, A>,
-    budget: usize,
-    stall: usize,
-    stalled: RefCell<bool>,
-}
-
-impl<A: AffineModel> CostFunction for &Budgeted<'_, '_, A> {
-    type Param = Vec<f64>;
-    type Output = f64;
-
-    fn cost(&self, point: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        // never an error: argmin's Nelder-Mead unwraps the costs of its first simplex;
-        // past the budget, a stall or a stop, the rest of its iterations are cheap
-        // no-ops and the best point evaluated is the answer
-        let count = *self.inner.evaluations.borrow();
-        if count - self.inner.progress.borrow().0 >= self.stall {
-            *self.stalled.borrow_mut() = true;
-        }
-        if *self.stalled.borrow() || count >= self.budget || (self.inner.stop)() {
-            return Ok(UNEVALUATED);
-        }
-        self.inner.cost(point)
-    }
 }

@@ -41,10 +41,14 @@
 //! Schön, Wills and Ninness (2011), *System identification of nonlinear state-space
 //! models*, Automatica; Lindsten and Schön (2013); Nocedal and Wright (2006).
 
+mod direct;
 mod model;
 mod mstep;
 mod objective;
 
+pub use direct::{
+    DirectFit, DirectOptions, DirectStart, DirectWarning, NOISY_SD, RIVAL_NATS, fit_direct,
+};
 pub use model::{GradientModel, Gradients, ObservationSum, central_difference};
 pub use mstep::{MStepOptions, MStepOutcome, m_step};
 pub use objective::q_hat;

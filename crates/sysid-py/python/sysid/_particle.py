@@ -162,7 +162,9 @@ def particle_filter(model, data, u=None, *, particles=1000, seed=1, resample="sy
 
 class ModelFitResults:
     """``sysid fit --model``: the fitted model file, the estimates, the log-likelihood
-    estimate, the method that ran, whether Ctrl-C stopped it, and the warnings."""
+    estimate, the method that ran, whether Ctrl-C stopped it, and the warnings.
+    ``bse``: standard errors by name where the method gives them (the direct fit of a
+    file that is not affine), else ``None``."""
 
     def __init__(self, raw, origin="<fit>"):
         self._raw = dict(raw)
@@ -180,6 +182,11 @@ class ModelFitResults:
     @property
     def params(self):
         return dict(zip(self.param_names, self._raw["estimate"]))
+
+    @property
+    def bse(self):
+        se = self._raw.get("standard_errors")
+        return None if se is None else dict(zip(self.param_names, se))
 
     def __reduce__(self):
         return (ModelFitResults, (self._raw, self.model.origin))
@@ -253,7 +260,10 @@ def fit(model, data, u=None, *, criterion="likelihood", method="robust", particl
     """``sysid fit --model``. ``criterion="likelihood"`` (the default): maximum
     likelihood for a model file's free parameters, by the method the command line
     chooses: closed-form particle EM when the equations are affine in them (``method``
-    ``robust``, ``em`` or ``psaem``), gradient EM otherwise. ``criterion="simulation"``:
+    ``robust``, ``em`` or ``psaem``); otherwise ``robust`` maximises the particle
+    likelihood directly from ``starts`` starts (the file's values, the simulation-error
+    fit's estimate, perturbations; ``method`` of the result ``"direct"``) and ``em`` is
+    gradient EM from the file's values. ``criterion="simulation"``:
     the noise-free model's simulation error minimised over the free parameters and the
     initial state (Levenberg-Marquardt from the file's values and ``starts - 1``
     perturbations, each value times ``exp(spread N(0, 1))``); returns

@@ -16,8 +16,10 @@ pub struct FitCommand {
     // flattened optional group empty when it nests groups of its own)
     /// A nonlinear model file (`.toml`, docs/model-format.md) whose free parameters
     /// are estimated from their values in the file: closed-form particle EM when the
-    /// equations are affine in them (`--method robust` or `em`), gradient EM otherwise.
-    /// The fitted model is written as a model file.
+    /// equations are affine in them (`--method robust` or `em`); otherwise the
+    /// particle likelihood maximised directly from --starts starts (`robust`: the
+    /// file's values, the simulation-error fit's estimate, perturbations) or gradient
+    /// EM from the file's values (`em`). The fitted model is written as a model file.
     #[arg(long, required = true)]
     pub model: Option<PathBuf>,
     /// The data (`fit --model`).
@@ -100,8 +102,10 @@ pub struct ParticleEmArgs {
     /// Particle fits: `robust` (the default: several starts around --init explored
     /// with the noise estimated from an inflated value, the best by a 1000-particle
     /// log-likelihood refined with --particles for --max-iter iterations and averaged;
-    /// docs/particle-em.md), `em` (one run of particle EM from --init, seed 000's
-    /// algorithm) or `psaem` (stochastic-approximation EM with a conditional particle
+    /// docs/particle-em.md; for a model file that is not affine, its likelihood
+    /// maximised directly from several starts), `em` (one run of particle EM from
+    /// --init, seed 000's algorithm; gradient EM for a file that is not affine) or
+    /// `psaem` (stochastic-approximation EM with a conditional particle
     /// filter with ancestor sampling, Lindsten 2013; 15 particles are usually enough).
     #[arg(long, default_value = "robust")]
     pub method: String,

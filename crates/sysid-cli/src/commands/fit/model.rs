@@ -1,9 +1,10 @@
 //! `sysid fit --model m.toml`: the free parameters of a nonlinear model file,
 //! estimated from their values in the file by the library's [`ModelFile::fit`]:
 //! closed-form particle EM when the equations are affine in them (seed 000; the robust
-//! driver by default), gradient EM otherwise (seed 001; rejection FFBSi with
-//! `--particles` paths, analytic gradients). The estimate is written as a model file
-//! that every nonlinear command reads.
+//! driver by default); otherwise the likelihood maximised directly from several starts
+//! by default (`--method robust`) or gradient EM (`--method em`; seed 001; rejection
+//! FFBSi with `--particles` paths, analytic gradients). The estimate is written as a
+//! model file that every nonlinear command reads.
 
 use super::affine::{Job, fit_options, fit_run, observer_of, progress_of, report};
 use super::options::Options;
@@ -13,6 +14,7 @@ use crate::error::CliError;
 use crate::files::{fmt, write_output};
 use sysid::em::Termination;
 use sysid::em::affine::AffineEmSpec;
+use sysid::em::gradient::{DirectFit, DirectOptions, GradientModel};
 use sysid::modelfile::{FileFit, FileFitError, FileFitReport, ModelFile};
 
 mod simulation;
@@ -64,6 +66,10 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     let affine = model.affine();
     let progress = match &affine {
         Some(_) => progress_of(&job),
+        None if o.method == "robust" => Some(crate::progress::Progress::spinner(
+            "direct maximum likelihood",
+            o.json,
+        )),
         None => Some(crate::progress::Progress::new(
             o.max_iter as u64,
             "gradient EM",
@@ -100,8 +106,140 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 affine.theta(p)
             })
         }
+        (
+            FileFitReport::Direct {
+                fit: direct,
+                simulation_start,
+            },
+            _,
+        ) => report_direct(o, &model, &fit, direct, *simulation_start),
         _ => report_gradient(o, &model, &fit),
     }
+}
+
+/// Writes the estimate of the direct fit (and, with `--trace`, its starts' table), and
+/// reports.
+fn report_direct(
+    o: &Options,
+    model: &ModelFile,
+    fit: &FileFit,
+    direct: &DirectFit,
+    simulation_start: Option<usize>,
+) -> Result<(), CliError> {
+    let context = o.data.data.display().to_string();
+    let gradient = model.gradient();
+    let names = model.free_names();
+    let named = |z: &[f64]| -> serde_json::Value {
+        names
+            .iter()
+            .cloned()
+            .zip(gradient.constrained(z))
+            .map(|(n, v)| (n, serde_json::json!(v)))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    };
+    let finite = |l: f64| l.is_finite().then_some(l);
+    let starts: Vec<serde_json::Value> = direct
+        .starts
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let origin = match k {
+                0 => "file",
+                _ if Some(k) == simulation_start => "simulation-error fit",
+                _ => "perturbed",
+            };
+            serde_json::json!({
+                "origin": origin, "start": named(&s.start), "start_loglik": finite(s.start_loglik),
+                "end": named(&s.end), "loglik": finite(s.loglik),
+                "evaluations": s.evaluations, "converged": s.converged,
+            })
+        })
+        .collect();
+    let warnings: Vec<String> = fit.warnings.iter().map(ToString::to_string).collect();
+    let summary = serde_json::json!({
+        "method": fit.method(), "seed": o.seed, "loglik_estimate": direct.loglik,
+        "loglik_sd": direct.loglik_sd, "particles": direct.particles, "data": context,
+        "interrupted": fit.interrupted(),
+    });
+    let mut outputs = vec![(o.out.clone(), fit.fitted.to_toml(&metadata_lines(&summary)))];
+    if let Some(path) = &o.trace {
+        let mut text = format!(
+            "start,start_loglik,loglik,evaluations,converged,{}\n",
+            names.join(",")
+        );
+        for (k, s) in direct.starts.iter().enumerate() {
+            let values: Vec<String> = gradient.constrained(&s.end).into_iter().map(fmt).collect();
+            text += &format!(
+                "{k},{},{},{},{},{}\n",
+                fmt(s.start_loglik),
+                fmt(s.loglik),
+                s.evaluations,
+                s.converged,
+                values.join(",")
+            );
+        }
+        outputs.push((path.clone(), text));
+    }
+    let mut report = written(o, &outputs, &warnings, summary)?;
+    report["estimate"] = named(&direct.estimate);
+    report["starts"] = serde_json::json!(starts);
+    report["chosen"] = serde_json::json!(direct.chosen);
+    report["explore_particles"] = serde_json::json!(DirectOptions::default().explore_particles);
+    report["finish_evaluations"] = serde_json::json!(direct.finish_evaluations);
+    report["converged"] = serde_json::json!(direct.converged);
+    report["standard_errors"] = match &direct.standard_errors {
+        Some(se) => names
+            .iter()
+            .cloned()
+            .zip(se)
+            .map(|(n, v)| (n, serde_json::json!(v)))
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
+        None => serde_json::Value::Null,
+    };
+    report["seconds"] = serde_json::json!({
+        "exploration": direct.timing.0.as_secs_f64(),
+        "finish": direct.timing.1.as_secs_f64(),
+    });
+    report["warnings"] = serde_json::json!(warnings);
+    crate::report(o.json, report, || {
+        let values: Vec<String> = names
+            .iter()
+            .zip(&fit.estimate)
+            .enumerate()
+            .map(|(k, (n, v))| match &direct.standard_errors {
+                Some(se) => format!("{n} = {} (se {})", fmt(*v), fmt(se[k])),
+                None => format!("{n} = {}", fmt(*v)),
+            })
+            .collect();
+        format!(
+            "likelihood maximised directly ({} is not affine in its free parameters): {} \
+             starts explored by a {}-particle filter in {:.1} s, start {}'s best finished \
+             by a {}-particle filter ({} filters, {:.1} s); loglik {} (sd {}); {}; wrote {}",
+            model.origin(),
+            direct.starts.len(),
+            DirectOptions::default().explore_particles,
+            direct.timing.0.as_secs_f64(),
+            direct.chosen,
+            direct.particles,
+            direct.finish_evaluations,
+            direct.timing.1.as_secs_f64(),
+            fmt(direct.loglik),
+            fmt(direct.loglik_sd),
+            values.join(", "),
+            o.out.display()
+        )
+    });
+    if fit.interrupted() {
+        // the filters run stand for the iterations
+        return Err(CliError::Interrupted {
+            iteration: direct.starts.iter().map(|s| s.evaluations).sum::<usize>()
+                + direct.finish_evaluations,
+            written: outputs.into_iter().map(|(path, _)| path).collect(),
+        });
+    }
+    Ok(())
 }
 
 /// A model file's fit error, named by the option or the data it comes from.
@@ -116,6 +254,25 @@ pub(super) fn file_error(o: &Options, e: FileFitError) -> CliError {
         FileFitError::Gradient(source) => CliError::GradientEm { context, source },
         other => bad("--model", other.to_string()),
     }
+}
+
+/// Writes `outputs`, prints `warnings`, and starts the report from `summary`.
+fn written(
+    o: &Options,
+    outputs: &[(std::path::PathBuf, String)],
+    warnings: &[String],
+    summary: serde_json::Value,
+) -> Result<serde_json::Value, CliError> {
+    for (path, text) in outputs {
+        write_output(path, o.force, text)?;
+    }
+    for w in warnings {
+        crate::warn(w);
+    }
+    let mut report = summary;
+    report["command"] = serde_json::json!("fit");
+    report["out"] = serde_json::json!(o.out);
+    Ok(report)
 }
 
 /// Writes the estimate of gradient EM and its trace, and reports.
@@ -147,15 +304,7 @@ fn report_gradient(o: &Options, model: &ModelFile, fit: &FileFit) -> Result<(), 
         }
         outputs.push((path.clone(), text));
     }
-    for (path, text) in &outputs {
-        write_output(path, o.force, text)?;
-    }
-    for w in &warnings {
-        crate::warn(w);
-    }
-    let mut report = summary;
-    report["command"] = serde_json::json!("fit");
-    report["out"] = serde_json::json!(o.out);
+    let mut report = written(o, &outputs, &warnings, summary)?;
     report["estimate"] = names
         .iter()
         .cloned()

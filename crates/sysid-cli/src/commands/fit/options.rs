@@ -19,7 +19,8 @@ pub struct Options {
     pub kind: Option<String>,
     /// A nonlinear model file (`.toml`, docs/model-format.md) whose free parameters
     /// are estimated from their values in the file: closed-form particle EM when the
-    /// equations are affine in them (`--method robust` or `em`), gradient EM otherwise.
+    /// equations are affine in them (`--method robust` or `em`); otherwise the direct
+    /// multi-start likelihood fit (`robust`) or gradient EM (`em`).
     /// The fitted model is written as a model file.
     pub model: Option<PathBuf>,
     pub data: DataArgs,

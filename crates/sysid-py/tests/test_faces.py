@@ -147,9 +147,8 @@ def test_direct_fit_of_a_file_that_is_not_affine_equals_the_command(tmp_path,
     product.write_text(OSCILLATOR.read_text().replace("c*v", "k*c*v"))
     out = tmp_path / "fit.toml"
     summary = cli_json("fit", "--model", product, "--data", oscillator_record, "--starts", 2,
-                       "--polish", "off", "--seed", 4, "--out", out)
-    res = sysid.fit(product, pd.read_csv(oscillator_record), starts=2, polish=False, seed=4,
-                    strict=False)
+                       "--seed", 4, "--out", out)
+    res = sysid.fit(product, pd.read_csv(oscillator_record), starts=2, seed=4, strict=False)
     written = sysid.ModelFile(out)
     for name, value in written.params.items():
         assert res.params[name] == pytest.approx(value, rel=1e-12, abs=0)

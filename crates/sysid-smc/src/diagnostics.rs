@@ -7,7 +7,7 @@
 //! - The log-likelihood sd is, with `repeats` > 0, the sample sd of the estimate over
 //!   the run and `repeats` more filters with independent streams; without repeats, the
 //!   run's single-run estimate ([`FilterOptions::variance_block`], `variance.rs`: one
-//!   filter's cost, measured 10-17 % low, and blind to rare losses of the state, which
+//!   filter's cost, measured 8-14 % low, and blind to rare losses of the state, which
 //!   only repeats can see). Above 1.5 nats the estimate is
 //!   too noisy to compare models or to drive PMMH (Doucet, Pitt, Deligiannidis and
 //!   Kohn 2015 recommend about 1 to 1.7); the warning says how many particles would

@@ -17,7 +17,7 @@ use argmin::core::{CostFunction, Executor, State, TerminationReason, Termination
 use argmin::solver::neldermead::NelderMead;
 use rand::RngExt;
 use std::cell::{Cell, RefCell};
-use sysid_smc::stream;
+use sysid_smc::{FilterModel, ParticleFilter, Series, stream};
 
 /// Nelder–Mead stops when the standard deviation of the simplex's log-likelihoods is
 /// below this (nats).
@@ -426,6 +426,23 @@ impl CostFunction for &Budgeted<'_, '_> {
         let l = self.search.evaluate(point);
         // Nelder-Mead needs a finite order: an invalid point is worse than any valid one
         Ok(if l.is_finite() { -l } else { UNEVALUATED })
+    }
+}
+
+/// The log-likelihood of `model` on `data` by `filter` with `seed`, or `-inf` where
+/// the parameters are not a model or the filter fails: the objective of every search.
+pub(crate) fn filtered_loglik<M: FilterModel + Sync, E>(
+    filter: &RefCell<ParticleFilter>,
+    model: Result<M, E>,
+    data: &Series<'_>,
+    seed: u64,
+) -> f64 {
+    let Ok(model) = model else {
+        return f64::NEG_INFINITY;
+    };
+    match filter.borrow_mut().run(&model, data, seed) {
+        Ok(summary) if summary.loglik.is_finite() => summary.loglik,
+        _ => f64::NEG_INFINITY,
     }
 }
 

@@ -36,7 +36,7 @@ use super::constraints::estimated_variances;
 use super::{
     AffineConstraints, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure,
 };
-use crate::likelihood_search::{Search, scored};
+use crate::likelihood_search::{Search, filtered_loglik, scored};
 use nalgebra::DMatrix;
 use std::cell::RefCell;
 use sysid_smc::{FilterOptions, ParticleFilter, Series};
@@ -227,13 +227,7 @@ pub(crate) fn polish<A: AffineModel>(
     // the log-likelihood at a point (`-inf` where the model is invalid or the filter fails)
     let loglik = |point: &[f64], seed: u64| {
         let params = at(start, &coords, point, constraints.as_ref());
-        let Ok(smc) = model.smc_model(&params) else {
-            return f64::NEG_INFINITY;
-        };
-        match filter.borrow_mut().run(&smc, &data, seed) {
-            Ok(summary) if summary.loglik.is_finite() => summary.loglik,
-            _ => f64::NEG_INFINITY,
-        }
+        filtered_loglik(&filter, model.smc_model(&params), &data, seed)
     };
     let common = |point: &[f64]| loglik(point, seed);
     let search = Search::new(&common, stop);

@@ -51,7 +51,7 @@
 //! on any number of threads.
 
 use super::{GradientEmError, GradientModel};
-use crate::likelihood_search::{Curvature, Search, scored};
+use crate::likelihood_search::{Curvature, Search, filtered_loglik, scored};
 use rand::RngExt;
 use rayon::prelude::*;
 use std::cell::RefCell;
@@ -266,13 +266,7 @@ impl<'a, G: GradientModel> Likelihood<'a, G> {
     /// The log-likelihood at `theta` (`-inf` where it is not a model or the filter
     /// fails).
     fn at(&self, theta: &[f64], seed: u64) -> f64 {
-        let Ok(smc) = self.model.smc_model(theta) else {
-            return f64::NEG_INFINITY;
-        };
-        match self.filter.borrow_mut().run(&smc, &self.data, seed) {
-            Ok(summary) if summary.loglik.is_finite() => summary.loglik,
-            _ => f64::NEG_INFINITY,
-        }
+        filtered_loglik(&self.filter, self.model.smc_model(theta), &self.data, seed)
     }
 }
 

@@ -221,7 +221,7 @@ fn fixed_matrices_from_a_start_file_equal_the_library() {
     ]);
     let spec: ModelSpec = serde_json::from_str(&std::fs::read_to_string(&start).unwrap()).unwrap();
     let mut options = LinearFitOptions::default();
-    options.start = Start::Model(Box::new(spec.build().unwrap()));
+    options.start = Start::of_file(&spec).unwrap();
     options.detrend = Some(TrendKind::Mean);
     options.fixes = vec![
         Fix::at_start(Matrix::C),
@@ -254,7 +254,7 @@ fn the_nile_local_level_with_a_diffuse_start_equals_the_library() {
     ]);
     let spec: ModelSpec = serde_json::from_str(&std::fs::read_to_string(&start).unwrap()).unwrap();
     let mut options = LinearFitOptions::default();
-    options.start = Start::Model(Box::new(spec.build().unwrap()));
+    options.start = Start::of_file(&spec).unwrap();
     options.fixes = vec![Fix::at_start(Matrix::A), Fix::at_start(Matrix::C)];
     options.initial = InitialState::Diffuse;
     let fit = library_fit(&read_csv(&path, None), options);
@@ -319,6 +319,8 @@ fn the_guide_library_example_gives_the_command_s_log_likelihood_to_the_bit() {
         "3",
         "--detrend",
         "mean",
+        "--initial",
+        "diffuse",
     ]);
     let expected = guide_constant();
     assert_eq!(

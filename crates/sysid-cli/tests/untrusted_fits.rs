@@ -132,10 +132,12 @@ fn ctrl_c_stops_the_polish_and_keeps_the_em_result() {
     assert!(printed(&stdout) >= em_loglik, "{stdout} vs {em_loglik}");
 }
 
-/// The README tour's order-8 fit drives R to 5e-7 of the outputs' variance (truth
-/// 0.05): a boundary maximum, which is now said, with a bound as the advice; followed,
-/// the advice raises the likelihood of a fresh record of the same system (302.6 to
-/// 317.1) and the fit converges without a warning.
+/// An order-8 fit of a 2-state system on 200 steps drives R towards zero (truth 0.05
+/// of the outputs' variance): a boundary maximum, which is said, with a bound as the
+/// advice; followed, the advice removes the boundary and raises the likelihood of a
+/// fresh record of the same system. The bounded fit's finish may still stop at its
+/// iteration limit (138 coordinates, about 50 determined by 200 steps): that is said
+/// too, and nothing else.
 #[test]
 fn a_collapsing_r_is_flagged_and_bounding_it_helps_on_fresh_data() {
     let dir = scratch_dir();
@@ -176,8 +178,13 @@ fn a_collapsing_r_is_flagged_and_bounding_it_helps_on_fresh_data() {
         .unwrap_or_else(|| panic!("{first:?}"));
     assert!(advice.contains("--min-output-noise 1e-3"), "{advice}");
     let second = warnings(&fit(&bounded, &["--min-output-noise", "1e-3"]));
-    // followed, it converges without a warning at all
-    assert!(second.is_empty(), "{second:?}");
+    // followed, the boundary is gone; only the finish's iteration limit may remain
+    assert!(
+        second
+            .iter()
+            .all(|w| w.contains("the finish") && w.contains("iteration limit")),
+        "{second:?}"
+    );
     assert!(
         !second.iter().any(|w| w.contains("R's smallest variance")),
         "{second:?}"

@@ -56,6 +56,9 @@ pub(crate) struct DiffuseColumns {
     pub(crate) stored_filt: Vec<f64>,
     pub(crate) stored_info: Vec<f64>,
     pub(crate) stored_score: Vec<f64>,
+    /// `S` and `s` summed value by value (for [`DiffuseColumns::moment`]).
+    running_info: Vec<f64>,
+    running_score: Vec<f64>,
 }
 
 impl DiffuseColumns {
@@ -73,6 +76,10 @@ impl DiffuseColumns {
         self.info.resize(q * q, 0.0);
         self.score.clear();
         self.score.resize(q, 0.0);
+        self.running_info.clear();
+        self.running_info.resize(q * q, 0.0);
+        self.running_score.clear();
+        self.running_score.resize(q, 0.0);
         let (s_pred, s_filt, s_info, s_score) = if store {
             ((t_len + 1) * n * q, t_len * n * q, t_len * q * q, t_len * q)
         } else {
@@ -100,6 +107,34 @@ impl DiffuseColumns {
             self.eps[c * ld + j] = w;
             self.score[c] -= w * eps_j;
         }
+    }
+
+    /// The one-step law of the observed output `j` just whitened by
+    /// [`DiffuseColumns::whiten`] under the diffuse prior, given the values before it:
+    /// `(mean, ln sd)` from the `delta = 0` pass's `mean0` and `diag`, or `None` while
+    /// the value still sees an undetermined direction of `delta` (its variance is
+    /// infinite: it is one of the values the diffuse likelihood conditions on).
+    ///
+    /// Given `delta`, the whitened innovation `w + E delta` is standard normal; given
+    /// the values before, `delta ~ N(S^+ s, S^+)` on the determined directions, so
+    /// `w ~ N(-E S^+ s, 1 + E S^+ E')`.
+    pub(crate) fn moment(&mut self, j: usize, mean0: f64, diag: f64, w: f64) -> Option<(f64, f64)> {
+        let (q, ld) = (self.q, self.ld_eps);
+        let e = DVector::from_fn(q, |c, _| self.eps[c * ld + j]);
+        let posterior = PartialPosterior::new(&self.running_info, &self.running_score, q);
+        let unseen = posterior.undetermined.tr_mul(&e).norm();
+        let law = (unseen <= 1e-8 * e.norm().max(f64::MIN_POSITIVE)).then(|| {
+            let shift = e.dot(&posterior.mean);
+            let spread = 1.0 + e.dot(&(&posterior.covariance * &e));
+            (mean0 - diag * shift, diag.abs().ln() + 0.5 * spread.ln())
+        });
+        for c in 0..q {
+            for d in 0..q {
+                self.running_info[c * q + d] += e[c] * e[d];
+            }
+            self.running_score[c] -= e[c] * w;
+        }
+        law
     }
 
     /// Adds `E'E` of this step to `S`, and moves the columns to the next time:

@@ -251,6 +251,10 @@ pub struct KalmanWorkspace {
     prev_observed: Vec<usize>,
     /// steady-state reuse switched off (see `set_steady_state_reuse`)
     no_reuse: bool,
+    /// whether a pass records [`KalmanWorkspace::scalar_moments`]
+    record_moments: bool,
+    /// `(mean, ln sd)` of each observed value given the values before it
+    moments: Vec<f64>,
 }
 
 impl KalmanWorkspace {
@@ -282,8 +286,53 @@ impl KalmanWorkspace {
     /// # Errors
     /// Invalid record ([`Record::validate`]) or a singular innovation covariance.
     pub fn loglik(&mut self, model: &LinearGaussianModel, record: &Record) -> Result<f64> {
-        record.validate(model, 0)?;
-        self.run(model, record, 0, Keep::LoglikOnly)
+        self.loglik_of_record(model, record, 0)
+    }
+
+    /// [`loglik`](Self::loglik) of the record numbered `index` of a data set (its
+    /// errors name that record).
+    ///
+    /// # Errors
+    /// As [`loglik`](Self::loglik).
+    pub fn loglik_of_record(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        index: usize,
+    ) -> Result<f64> {
+        record.validate(model, index)?;
+        self.run(model, record, index, Keep::LoglikOnly)
+    }
+
+    /// Log-likelihood of one record and, in `moments`, the one-step conditional law of
+    /// every observed output value: its mean and the logarithm of its standard
+    /// deviation given all the values before it, in the filter's order (time by time,
+    /// the observed outputs of a step in column order, each given the earlier ones of
+    /// its step). Two entries per observed value: `[mean, ln sd, mean, ln sd, ...]`.
+    ///
+    /// The log-likelihood is `-sum (ln sd + (y - mean)^2 / (2 sd^2)) - N/2 ln 2 pi` over
+    /// these values (plus the diffuse correction of a diffuse initial state), so their
+    /// derivatives give the Fisher information of the parameters (Fisher scoring,
+    /// Gauss-Newton for a Gaussian likelihood). `moments` is cleared first; `index`
+    /// numbers the record in errors.
+    ///
+    /// # Errors
+    /// As [`loglik`](Self::loglik).
+    pub fn scalar_moments(
+        &mut self,
+        model: &LinearGaussianModel,
+        record: &Record,
+        index: usize,
+        moments: &mut Vec<f64>,
+    ) -> Result<f64> {
+        record.validate(model, index)?;
+        self.record_moments = true;
+        std::mem::swap(&mut self.moments, moments);
+        self.moments.clear();
+        let result = self.run(model, record, index, Keep::LoglikOnly);
+        std::mem::swap(&mut self.moments, moments);
+        self.record_moments = false;
+        result
     }
 
     /// Square-root filter pass over one record, keeping what the smoother needs.
@@ -395,13 +444,38 @@ impl KalmanWorkspace {
         record_index: usize,
         keep: Keep,
     ) -> Result<f64> {
-        sysid_linalg::simd::dispatch(ForwardPass {
+        let loglik = sysid_linalg::simd::dispatch(ForwardPass {
             workspace: self,
             model,
             record,
             record_index,
             keep,
-        })
+        })?;
+        // The diffuse log-likelihood does not depend on mu along the diffuse directions
+        // (delta absorbs the shift), but it is computed as log p(y | delta = 0) plus a
+        // correction, which cancel when the data put delta far from 0 (a record in
+        // other units than mu, or a tiny R): then the pass is run once more from mu
+        // moved to the posterior mean of delta, where the correction is small.
+        if keep == Keep::LoglikOnly
+            && !self.record_moments
+            && let Some(delta) = &self.filter.delta
+            && 0.5 * delta.factor.tr_mul(&delta.mean).norm_squared() > RECENTRE_NATS
+        {
+            let shift = model.diffuse() * &delta.mean;
+            let centred = model
+                .to_builder()
+                .mu(model.mu() + shift)
+                .build()
+                .expect("moving mu keeps a valid model");
+            return sysid_linalg::simd::dispatch(ForwardPass {
+                workspace: self,
+                model: &centred,
+                record,
+                record_index,
+                keep,
+            });
+        }
+        Ok(loglik)
     }
 
     /// [`run`](Self::run) as compiled into the caller (a dispatched kernel).
@@ -416,7 +490,7 @@ impl KalmanWorkspace {
         let (n, p) = (model.n(), model.p());
         let t_len = record.len();
         let diffuse = model.is_diffuse();
-        if keep == Keep::LoglikOnly && n == 1 && p == 1 && !diffuse {
+        if keep == Keep::LoglikOnly && n == 1 && p == 1 && !diffuse && !self.record_moments {
             return crate::scalar::loglik(model, record, record_index, !self.no_reuse);
         }
         self.prepare(model, t_len, keep);
@@ -526,6 +600,20 @@ impl KalmanWorkspace {
                         .diffuse
                         .whiten(j, c_row, &pre[j * ld..j * ld + j], diag, w);
                 }
+                if self.record_moments {
+                    let law = if diffuse {
+                        // a value that still sees an undetermined direction is
+                        // conditioned on: constant moments, no information
+                        self.filter
+                            .diffuse
+                            .moment(j, y_t[oi] - e, diag, w)
+                            .unwrap_or((y_t[oi], 0.0))
+                    } else {
+                        (y_t[oi] - e, diag.abs().ln())
+                    };
+                    self.moments.push(law.0);
+                    self.moments.push(law.1);
+                }
                 quad_sum += w * w;
                 logdet.push(diag);
             }
@@ -604,6 +692,11 @@ impl KalmanWorkspace {
         Ok(loglik)
     }
 }
+
+/// A diffuse pass whose correction's quadratic term `s' S^{-1} s / 2` exceeds this many
+/// nats is run again from the posterior mean of `delta` (the two terms it cancels
+/// against are then small: derivatives by differences need about 1e-12 nats).
+const RECENTRE_NATS: f64 = 1e2;
 
 /// The forward pass as a [`Kernel`](sysid_linalg::simd::Kernel).
 struct ForwardPass<'w, 'm, 'r> {

@@ -73,7 +73,10 @@ pub use data::Record;
 pub use error::{KalmanError, Result};
 pub use filter::{FilterOutput, KalmanWorkspace};
 pub use frequency::TransferFunction;
-pub use initial::{InitialState, spectral_radius, stationary_covariance, stationary_input_window};
+pub use initial::{
+    InitialState, early_input_mean, spectral_radius, stationary_covariance,
+    stationary_input_memory, stationary_input_window,
+};
 pub use long::{BLOCK_STEPS, BlockFilter};
 pub use model::{LinearGaussianModel, ModelBuilder};
 pub use predict::{Forecast, ForecastIntervals, PredictionWarning, Predictions};

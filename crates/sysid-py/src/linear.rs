@@ -149,12 +149,7 @@ fn n4sid_fit<'py>(
     detrend: Option<&str>,
     time: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let choice = WeightingChoice::parse(weighting).ok_or_else(|| {
-        Failure::option(
-            "weighting",
-            format!("unknown weighting {weighting:?} (known: auto, n4sid, moesp, cva)"),
-        )
-    })?;
+    let choice = weighting_of(weighting)?;
     let options = N4sidOptions {
         order: order.map_or(Order::Auto, Order::Fixed),
         block_rows,
@@ -257,6 +252,16 @@ fn trend_kind(text: Option<&str>) -> Result<Option<TrendKind>, Failure> {
     }
 }
 
+/// A subspace weighting: `auto` or a weighting's name.
+fn weighting_of(weighting: &str) -> Result<WeightingChoice, Failure> {
+    WeightingChoice::parse(weighting).ok_or_else(|| {
+        Failure::option(
+            "weighting",
+            format!("unknown weighting {weighting:?} (known: auto, n4sid, moesp, cva)"),
+        )
+    })
+}
+
 /// A switch option: `"auto"`, `"on"`/`True`, `"off"`/`False`.
 fn switch(name: &str, value: &str) -> Result<Switch, Failure> {
     match value {
@@ -334,11 +339,9 @@ fn fit_options(o: &Bound<'_, PyDict>) -> PyResult<LinearFitOptions> {
     options.start = match get::<Option<String>>(o, "init")? {
         None => Start::N4sid {
             stable: get(o, "stable")?,
+            weighting: weighting_of(&get::<String>(o, "weighting")?)?,
         },
-        Some(text) => {
-            let model = spec_of(&text)?.build().map_err(Failure::sysid)?;
-            Start::Model(Box::new(model))
-        }
+        Some(text) => Start::of_file(&spec_of(&text)?).map_err(Failure::sysid)?,
     };
     options.fixes = get::<Vec<FixGiven>>(o, "fix")?
         .into_iter()

@@ -24,27 +24,34 @@
 //! Shumway and Stoffer, J. Time Series Analysis 3 (1982); Gibson and Ninness,
 //! Automatica 41 (2005); Blocker (2008).
 
+mod coordinates;
 mod ecm;
 mod mstep;
+mod objective;
 mod pipeline;
 mod quasi_newton;
+mod scoring;
 mod spec;
 mod squarem;
 mod uncertainty;
 
 pub use mstep::m_step;
+pub use objective::LinearObjective;
 pub use pipeline::{
     AUTO_MAX_COORDINATES, Acceleration, CheckedLinearFitOptions, EmFailure, FitStatus, Fix,
     FixValue, InformationCriteria, LinearFit, LinearFitError, LinearFitOptions, LinearFitWarning,
     MAX_ORDER, Matrix, OrderChoice, OrderRow, OrderTable, Selection, Signals, SingularPart, Start,
-    Switch, ValidationFit, basis_for_output_matrix, transform_state,
+    StartOutcome, Switch, ValidationFit, basis_for_output_matrix, transform_state,
 };
 pub use quasi_newton::{
     QuasiNewtonOptions, QuasiNewtonOutcome, coordinate_count, maximise_loglik,
     maximise_loglik_until,
 };
+pub use scoring::{ScoringOptions, ScoringOutcome, maximise_by_scoring};
 pub use squarem::SquaremLinearEm;
-pub use uncertainty::{ParameterEstimate, Uncertainty, UncertaintyError, standard_errors};
+pub use uncertainty::{
+    ParameterEstimate, Uncertainty, UncertaintyError, standard_errors, standard_errors_of,
+};
 
 pub use spec::{Covariance, FixedEntries, LinearEmSpec, floor_output_noise, floor_variances};
 

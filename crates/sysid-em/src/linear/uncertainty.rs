@@ -1,9 +1,10 @@
 //! Standard errors of a maximum-likelihood fit from the observed information: the
 //! negative Hessian of the exact log-likelihood in the model's own entries.
 
+use super::LinearObjective;
 use super::{Covariance, LinearEmSpec};
 use nalgebra::{DMatrix, DVector};
-use sysid_kalman::{LinearGaussianModel, Record, loglik_dataset};
+use sysid_kalman::{KalmanWorkspace, LinearGaussianModel, Record};
 
 /// One free parameter's estimate and its uncertainty.
 #[derive(Debug, Clone, PartialEq)]
@@ -257,6 +258,23 @@ pub fn standard_errors(
     records: &[Record],
     spec: &LinearEmSpec,
 ) -> Result<Uncertainty, UncertaintyError> {
+    standard_errors_of(
+        model,
+        &LinearObjective::new(records, sysid_kalman::InitialState::Given),
+        spec,
+    )
+}
+
+/// [`standard_errors`] of the log-likelihood `objective` (the written model's, with the
+/// initial state its file gives each record: what a fit reports).
+///
+/// # Errors
+/// As [`standard_errors`].
+pub fn standard_errors_of(
+    model: &LinearGaussianModel,
+    objective: &LinearObjective<'_>,
+    spec: &LinearEmSpec,
+) -> Result<Uncertainty, UncertaintyError> {
     if spec.s {
         return Err(UncertaintyError::FreeCrossCovariance);
     }
@@ -279,11 +297,16 @@ pub fn standard_errors(
         })
         .collect();
     let mut evaluations = 0;
+    let mut ws = KalmanWorkspace::new();
+    // the differences must not see the steady-state reuse's switch points
+    ws.set_steady_state_reuse(false);
     let mut f = |delta: &[f64]| -> Result<f64, UncertaintyError> {
         evaluations += 1;
         let m = moved(model, &entries, delta)
             .ok_or_else(|| UncertaintyError::Evaluation("a step leaves the valid models".into()))?;
-        loglik_dataset(&m, records).map_err(|e| UncertaintyError::Evaluation(e.to_string()))
+        objective
+            .loglik(&m, &mut ws)
+            .map_err(|e| UncertaintyError::Evaluation(e.to_string()))
     };
     let f0 = f(&vec![0.0; k])?;
     let mut hessian = DMatrix::zeros(k, k);

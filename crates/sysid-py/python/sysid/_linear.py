@@ -400,8 +400,8 @@ def _fixes(fix):
 
 
 def fit_lti(data, order=None, u=None, *, init="n4sid", fix=(), diag=(), full_r=False,
-            stable=False, offset=False, estimate_initial=False, initial="model",
-            accelerate="squarem", polish="auto", std_errors="auto", detrend=None,
+            stable=False, weighting="auto", offset=False, estimate_initial=False,
+            initial="model", accelerate="squarem", polish="auto", std_errors="auto", detrend=None,
             split=None, select="bic", max_iter=500, tol=None, tol_nats=1e-4,
             min_variance=0.0, min_output_noise=0.0, time=None, inputs=None, outputs=None,
             progress=None, threads=None, strict=False):
@@ -426,7 +426,7 @@ def fit_lti(data, order=None, u=None, *, init="n4sid", fix=(), diag=(), full_r=F
     switch = {True: "on", False: "off"}
     options = dict(
         order=order, order_range=order_range, select=select, init=init, stable=stable,
-        fix=_fixes(fix), diag=[diag] if isinstance(diag, str) else list(diag),
+        weighting=weighting, fix=_fixes(fix), diag=[diag] if isinstance(diag, str) else list(diag),
         full_r=full_r, min_variance=float(min_variance),
         min_output_noise=float(min_output_noise), offset=offset,
         estimate_initial=estimate_initial, initial=initial, accelerate=accelerate,

@@ -60,7 +60,8 @@ pub struct FitCommand {
 #[derive(clap::Subcommand, Debug)]
 pub enum FitClass {
     /// Linear Gaussian state space by exact EM (from N4SID or a model file), with
-    /// SQUAREM, a quasi-Newton polish and standard errors.
+    /// SQUAREM, a Fisher-scoring finish of the written model's likelihood and standard
+    /// errors.
     Lti(Box<LtiArgs>),
     /// The seed-000 benchmark by particle EM (the robust driver by default).
     Nlbench(Box<NlbenchArgs>),
@@ -173,6 +174,12 @@ pub struct LtiArgs {
     /// --stable`).
     #[arg(long)]
     pub stable: bool,
+    /// `--init n4sid`: the SVD weighting of the subspace start (`moesp`, `n4sid`,
+    /// `cva`), or `auto`: EM runs from each of the three and the best, by the written
+    /// model's likelihood, is finished (a black-box likelihood has several local maxima,
+    /// and the weightings often start in different ones).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "moesp", "n4sid", "cva"])]
+    pub weighting: String,
     /// Linear EM: also estimate the output offset h (by default h is held at the
     /// start's value: for `--init n4sid`, the record's mean output less the
     /// steady-state response to its mean input).
@@ -200,9 +207,9 @@ pub struct LtiArgs {
     #[arg(long, default_value = "squarem", value_parser = ["squarem", "none"])]
     pub accelerate: String,
     /// After EM, maximise the likelihood directly. Linear EM: the exact log-likelihood
-    /// by BFGS (quasi-Newton, superlinear near the maximum, where EM crawls): `auto`
-    /// (the default) when the free parameters number at most 20 (structural models),
-    /// `on`, `off`. The robust particle driver (`fit nlbench`, `fit affine`): a
+    /// of the model as written (its initial state included) by damped Fisher scoring
+    /// that never walks the directions the data cannot see (a black-box model's change
+    /// of basis): `auto` (the default) for at most 400 free coordinates, `on`, `off`. The robust particle driver (`fit nlbench`, `fit affine`): a
     /// 10 000-particle log-likelihood on common random numbers by Nelder-Mead from
     /// its estimate, which undoes the small-particle E-step's bias of the noise
     /// variances (`auto` and `on`), or not (`off`).

@@ -4,7 +4,7 @@
 use super::fix::{parse_diagonal, parse_fix};
 use super::options::Options;
 use crate::error::CliError;
-use crate::files::{read_model, write_output};
+use crate::files::{read_model_file, write_output};
 use std::path::Path;
 use sysid::em::linear::{
     Acceleration, CheckedLinearFitOptions, LinearFit, LinearFitError, LinearFitOptions,
@@ -138,11 +138,25 @@ fn library_options(
     options.tol = o.tol;
     options.tol_nats = o.tol_nats;
     options.start = if n4sid {
-        Start::N4sid { stable: o.stable }
+        Start::N4sid {
+            stable: o.stable,
+            weighting: sysid::subspace::WeightingChoice::parse(&o.weighting).ok_or_else(|| {
+                CliError::BadOption {
+                    option: "--weighting",
+                    message: format!(
+                        "unknown weighting {:?} (known: auto, moesp, n4sid, cva)",
+                        o.weighting
+                    ),
+                }
+            })?,
+        }
     } else {
-        let model = read_model(Path::new(&o.init))?;
-        crate::commands::check_columns(&model, file)?;
-        Start::Model(Box::new(model))
+        let stored = read_model_file(Path::new(&o.init))?;
+        crate::commands::check_columns(&stored.model, file)?;
+        Start::Model {
+            model: Box::new(stored.model),
+            initial: stored.initial,
+        }
     };
     options.check().map_err(cli_error)
 }
@@ -285,14 +299,20 @@ fn summary_json(o: &Options, fit: &LinearFit, started: std::time::Instant) -> se
             .collect::<Vec<_>>()
     });
     serde_json::json!({
-        "command": "fit", "loglik": fit.loglik, "iterations": fit.iterations,
+        "command": "fit", "loglik": fit.loglik, "em_loglik": fit.em_loglik,
+        "initial": fit.initial, "iterations": fit.iterations,
+        "starts": fit.starts.iter().map(|s| serde_json::json!({
+            "weighting": s.weighting.map(|w| w.name()), "em_loglik": s.em_loglik,
+            "loglik": s.loglik, "em_iterations": s.em_iterations,
+        })).collect::<Vec<_>>(),
         "order_table": order_table,
         "parameters": parameters,
         "e_steps": fit.e_steps, "accelerate": fit.acceleration.name(),
         "polish": fit.polish.as_ref().map(|p| serde_json::json!({
-            "coordinates": p.parameters, "iterations": p.iterations,
-            "evaluations": p.evaluations, "status": p.status, "converged": p.converged,
-            "gain": p.loglik - p.loglik_before,
+            "coordinates": p.parameters, "identified": p.identified,
+            "iterations": p.iterations, "evaluations": p.evaluations, "status": p.status,
+            "converged": p.converged, "gain": p.loglik - p.loglik_before,
+            "distance_nats": p.distance,
         })),
         "termination": fit.status.name(),
         "em_termination": sysid::em::linear::FitStatus::of_em(&fit.em_termination).name(),

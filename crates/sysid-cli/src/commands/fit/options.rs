@@ -63,6 +63,9 @@ pub struct Options {
     /// `--init n4sid`: enforce a stable A in the subspace start (see `sysid n4sid
     /// --stable`).
     pub stable: bool,
+    /// `--init n4sid`: the SVD weighting of the subspace start, or `auto` (the
+    /// default): EM from each of MOESP, N4SID and CVA, the best finished.
+    pub weighting: String,
     /// Linear EM: also estimate the output offset h (by default h is held at the
     /// start's value: for `--init n4sid`, the record's mean output less the
     /// steady-state response to its mean input).
@@ -188,6 +191,7 @@ impl Options {
             min_output_noise: 0.0,
             full_r: false,
             stable: false,
+            weighting: "auto".into(),
             offset: false,
             estimate_initial: false,
             initial: "model".into(),
@@ -275,6 +279,7 @@ impl Options {
             min_output_noise: a.min_output_noise,
             full_r: a.full_r,
             stable: a.stable,
+            weighting: a.weighting,
             offset: a.offset,
             estimate_initial: a.estimate_initial,
             initial: a.initial,

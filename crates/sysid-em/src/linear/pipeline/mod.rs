@@ -59,8 +59,8 @@ pub use signals::Signals;
 pub use warning::LinearFitWarning;
 
 use crate::linear::{
-    Covariance, LinearEmError, LinearEmSpec, QuasiNewtonOptions, QuasiNewtonOutcome, Uncertainty,
-    coordinate_count, fit, fit_squarem, maximise_loglik_until, standard_errors,
+    Covariance, LinearEmError, LinearEmSpec, LinearObjective, ScoringOptions, ScoringOutcome,
+    Uncertainty, coordinate_count, fit, fit_squarem, maximise_by_scoring, standard_errors_of,
 };
 use crate::{EmObserver, EmOptions, EmResult, Termination};
 use nalgebra::DVector;
@@ -69,16 +69,22 @@ use sysid_kalman::{
     InitialState, KalmanError, LinearGaussianModel, Metadata, ModelSpec, ParameterCovariance,
     Trend, TrendError, fit_percent,
 };
-use sysid_subspace::{N4sidOptions, Order, SubspaceError, n4sid, spectral_radius};
+use sysid_subspace::{
+    N4sidOptions, Order, SubspaceError, Weighting, WeightingChoice, n4sid, spectral_radius,
+};
 
-/// `Switch::Auto` polishes, and gives standard errors, when the free coordinates are
-/// at most this many (each gradient costs twice as many filter passes; a black-box
-/// model of order 3 with one input and output already has 23).
+/// `Switch::Auto` gives standard errors when the free coordinates are at most this many
+/// (the observed information costs about twice their square in filter passes).
 pub const AUTO_MAX_COORDINATES: usize = 20;
+
+/// `Switch::Auto` finishes EM by scoring when the free coordinates are at most this
+/// many (an iteration costs twice as many filter passes; a black-box model of order 8
+/// with two inputs and outputs has 138).
+pub const AUTO_MAX_FINISH_COORDINATES: usize = 400;
 
 /// With a polish to follow, EM hands over when it is this many nats from its maximum
 /// (by its own estimate).
-const POLISH_SWITCH_NATS: f64 = 0.1;
+const POLISH_SWITCH_NATS: f64 = 1e-2;
 
 /// Why a linear fit could not give a model.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -202,6 +208,19 @@ pub struct ValidationFit {
     pub prediction_fit_percent: Option<f64>,
 }
 
+/// One start of a fit from several (the subspace weightings of an N4SID start).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StartOutcome {
+    /// The weighting of its subspace fit.
+    pub weighting: Option<Weighting>,
+    /// EM's own objective at its end.
+    pub em_loglik: Option<f64>,
+    /// The written model's log-likelihood at EM's end (what ranks the starts).
+    pub loglik: f64,
+    /// EM iterations.
+    pub em_iterations: usize,
+}
+
 /// EM failed after its start: the last good model is the result.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EmFailure {
@@ -230,12 +249,20 @@ pub struct LinearFit {
     pub initial: InitialState,
     /// The trend removed before the fit (a linear one is stored beside the model).
     pub trend: Option<Trend>,
-    /// The log-likelihood of the training record at the estimate.
+    /// The log-likelihood of the training record under the written model:
+    /// [`LinearFit::model`] with the initial state [`LinearFit::initial`] (what `sysid
+    /// loglik` gives the file on the training rows). With the finish, the maximum.
     pub loglik: Option<f64>,
+    /// EM's own objective at its last iterate: the training record's log-likelihood with
+    /// the initial state EM holds (the start's, or `--initial`'s), the scale of
+    /// [`LinearFit::trace`].
+    pub em_loglik: Option<f64>,
     /// The log-likelihood after every EM iteration (cycle, with SQUAREM).
     pub trace: Vec<f64>,
-    /// EM iterations (cycles).
+    /// EM iterations (cycles) from the start that was finished.
     pub iterations: usize,
+    /// Every start EM ran from, when there were several (the best was finished).
+    pub starts: Vec<StartOutcome>,
     /// E-steps (filter and smoother passes).
     pub e_steps: usize,
     /// How EM was run.
@@ -244,8 +271,8 @@ pub struct LinearFit {
     pub status: FitStatus,
     /// The EM runner's own termination.
     pub em_termination: Termination<LinearEmError>,
-    /// The quasi-Newton polish, when it ran.
-    pub polish: Option<QuasiNewtonOutcome>,
+    /// The scoring finish, when it ran ([`crate::linear::maximise_by_scoring`]).
+    pub polish: Option<ScoringOutcome>,
     /// Standard errors and their covariance, when given.
     pub uncertainty: Option<Uncertainty>,
     /// AIC and BIC.
@@ -368,7 +395,7 @@ fn fit_prepared(
         }
         None => None,
     };
-    let mut spec = LinearEmSpec {
+    let base = LinearEmSpec {
         min_variance: options.min_variance,
         h: options.offset,
         mu: options.estimate_initial,
@@ -376,28 +403,117 @@ fn fit_prepared(
         output_noise_floor: output_noise_floor(&training, options.min_output_noise)?,
         ..LinearEmSpec::default()
     };
-    let (start, mut warnings) = start_model(&training, options, order, &mut spec)?;
+    let (candidates, mut warnings) = start_models(&training, options, order, &base)?;
     let records = std::slice::from_ref(&training.record);
+    // the user's own initial state is kept in the written model: estimated or fixed
+    // mu, P1, or a start file's own (statsmodels' `initialize_known`)
+    let user_initial = options.estimate_initial
+        || options
+            .fixes
+            .iter()
+            .any(|f| matches!(f.matrix, Matrix::P1 | Matrix::Mu))
+        || matches!(
+            (&options.start, options.initial),
+            (
+                Start::Model {
+                    initial: InitialState::Given,
+                    ..
+                },
+                InitialState::Given
+            )
+        );
+    // EM from every start; the best by the written model's likelihood is finished
+    let mut starts = Vec::new();
+    let mut chosen: Option<(
+        Candidate,
+        EmResult<LinearGaussianModel, LinearEmError>,
+        usize,
+        f64,
+    )> = None;
+    let mut first_failure = None;
+    let mut total_e_steps = 0;
+    let several = candidates.len() > 1;
+    for candidate in candidates {
+        let coordinates = coordinate_count(&candidate.model, &candidate.spec);
+        let polish_on = match options.polish {
+            Switch::On => true,
+            Switch::Off => false,
+            Switch::Auto => coordinates > 0 && coordinates <= AUTO_MAX_FINISH_COORDINATES,
+        };
+        let (run, e_steps) = if candidate.output_error() {
+            match sysid_kalman::loglik_dataset(&candidate.model, records) {
+                Ok(loglik) => (unmoved(candidate.model.clone(), loglik), 0),
+                Err(e) => {
+                    first_failure.get_or_insert((e.into(), candidate));
+                    continue;
+                }
+            }
+        } else {
+            run_em(
+                &candidate.model,
+                records,
+                &candidate.spec,
+                options,
+                polish_on,
+                observer,
+            )?
+        };
+        total_e_steps += e_steps;
+        if let Termination::Error { error, iteration } = &run.termination
+            && (*iteration <= 1 || run.loglik.is_none())
+        {
+            first_failure.get_or_insert((error.clone(), candidate));
+            continue;
+        }
+        let written = written_initial(&run.estimate, user_initial, options.initial);
+        let value = LinearObjective::new(records, written)
+            .loglik(&run.estimate, &mut sysid_kalman::KalmanWorkspace::new())
+            .unwrap_or(f64::NEG_INFINITY);
+        starts.push(StartOutcome {
+            weighting: candidate.weighting,
+            em_loglik: run.loglik,
+            loglik: value,
+            em_iterations: run.iterations,
+        });
+        let interrupted = matches!(run.termination, Termination::Interrupted { .. });
+        if chosen.as_ref().is_none_or(|c| value > c.3 || c.3.is_nan()) {
+            chosen = Some((candidate, run, e_steps, value));
+        }
+        if interrupted {
+            break;
+        }
+    }
+    let Some((candidate, mut run, _, written_value)) = chosen else {
+        let (error, candidate) = first_failure.expect("a start was tried");
+        return Err(start_failure(
+            error,
+            &candidate.model,
+            &training,
+            &candidate.spec,
+        ));
+    };
+    if !several {
+        starts.clear();
+    }
+    let e_steps = total_e_steps;
+    let Candidate {
+        model: start, spec, ..
+    } = candidate;
     let coordinates = coordinate_count(&start, &spec);
     let feasible = coordinates > 0 && coordinates <= AUTO_MAX_COORDINATES;
     let polish_on = match options.polish {
         Switch::On => true,
         Switch::Off => false,
-        Switch::Auto => feasible,
+        Switch::Auto => coordinates > 0 && coordinates <= AUTO_MAX_FINISH_COORDINATES,
     };
-    // an output-error model (Q held at zero): EM cannot move A (the smoothed states
-    // are then a deterministic function of the parameters), so the likelihood is
-    // maximised directly
     let output_error = spec.q == Covariance::Fixed && start.q().iter().all(|&v| v == 0.0);
-    let (mut run, e_steps) = if output_error {
-        let loglik = sysid_kalman::loglik_dataset(&start, records)
-            .map_err(|e| start_failure(e.into(), &start, &training, &spec))?;
-        (unmoved(start.clone(), loglik), 0)
-    } else {
-        run_em(&start, records, &spec, options, polish_on, observer)?
-    };
     let polish_on = polish_on || output_error;
     let interrupted = matches!(run.termination, Termination::Interrupted { .. });
+    // the finish maximises the likelihood with the initial state the written model
+    // gives a record, so that the log-likelihood reported is the file's
+    let initial = written_initial(&run.estimate, user_initial, options.initial);
+    let objective = LinearObjective::new(records, initial);
+    let em_loglik = run.loglik;
     let mut polish = None;
     if polish_on
         && !interrupted
@@ -405,28 +521,42 @@ fn fit_prepared(
         && !matches!(run.termination, Termination::Error { .. })
     {
         let stop = || observer.should_stop();
-        let outcome = maximise_loglik_until(
+        let outcome = maximise_by_scoring(
             &run.estimate,
-            records,
+            &objective,
             &spec,
-            &QuasiNewtonOptions::default(),
+            &ScoringOptions::default(),
             &stop,
         )?;
         run.estimate = outcome.model.clone();
-        run.loglik = Some(outcome.loglik);
         if outcome.interrupted {
-            // Ctrl-C in the polish: the fit ends as interrupted, with EM's estimate or
-            // the better point the polish had reached
+            // Ctrl-C in the finish: the fit ends as interrupted, with EM's estimate or
+            // the better point the finish had reached
             run.termination = Termination::Interrupted {
                 iteration: run.iterations,
             };
         }
         polish = Some(outcome);
     }
+    // the written model's log-likelihood of the training record (what `sysid loglik`
+    // of the file gives it)
+    if run.loglik.is_some() {
+        run.loglik = objective
+            .loglik(&run.estimate, &mut sysid_kalman::KalmanWorkspace::new())
+            .ok();
+    }
     let failure = match &run.termination {
         Termination::Error { error, iteration } if *iteration > 1 && run.loglik.is_some() => {
-            let (diagnosis, data_cause) =
-                diagnosis::decrease_diagnosis(&run.estimate, &training, &spec);
+            let (diagnosis, data_cause) = match error {
+                LinearEmError::Kalman(KalmanError::DiffuseNotIdentified { .. }) => (
+                    "EM reached a model with a state the outputs hardly see, whose diffuse \
+                     initial value the record cannot determine (an order high for the data): \
+                     try a lower order, or the stationary initial state (--initial model)"
+                        .into(),
+                    true,
+                ),
+                _ => diagnosis::decrease_diagnosis(&run.estimate, &training, &spec),
+            };
             Some(EmFailure {
                 error: error.clone(),
                 iteration: *iteration,
@@ -467,10 +597,20 @@ fn fit_prepared(
         warnings.push(LinearFitWarning::PolishShort {
             status: p.status.clone(),
             gain: p.loglik - p.loglik_before,
-            free_basis: spec.a && spec.c,
+            distance: p.distance,
+            identified: p.identified,
+            coordinates: p.parameters,
         });
     }
-    if let Some(p) = polish.as_ref().filter(|p| p.boundary) {
+    if let Some(em) = em_loglik
+        && initial == InitialState::Stationary
+        && em - written_value > TRANSIENT_NATS
+    {
+        warnings.push(LinearFitWarning::TransientStart {
+            nats: em - written_value,
+        });
+    }
+    if let Some(p) = polish.as_ref().filter(|p| p.boundary && !p.converged) {
         warnings.push(LinearFitWarning::PolishAtBoundary {
             status: p.status.clone(),
         });
@@ -487,18 +627,6 @@ fn fit_prepared(
             spectral_radius: radius,
         });
     }
-    let user_initial = options.estimate_initial
-        || options
-            .fixes
-            .iter()
-            .any(|f| matches!(f.matrix, Matrix::P1 | Matrix::Mu));
-    let initial = if user_initial {
-        InitialState::Given
-    } else if radius < 1.0 {
-        InitialState::Stationary
-    } else {
-        InitialState::Diffuse
-    };
     let model = match &trend {
         Some(t) => t.written_model(&run.estimate)?,
         None => run.estimate.clone(),
@@ -512,7 +640,7 @@ fn fit_prepared(
     };
     let uncertainty = match (want_errors
         && !matches!(run.termination, Termination::Interrupted { .. }))
-    .then(|| standard_errors(&run.estimate, records, &spec))
+    .then(|| standard_errors_of(&run.estimate, &objective, &spec))
     {
         Some(Ok(u)) => Some(u),
         Some(Err(e)) => {
@@ -550,8 +678,10 @@ fn fit_prepared(
         initial,
         trend,
         loglik: run.loglik,
+        em_loglik,
         trace: run.trace,
         iterations: run.iterations,
+        starts,
         e_steps,
         acceleration: options.acceleration,
         status,
@@ -568,41 +698,103 @@ fn fit_prepared(
     })
 }
 
-/// The start of EM on the (detrended) training record, with the fixes and diagonal
-/// covariances applied to it and to `spec`, and the start's warnings.
-fn start_model(
+/// A start of EM: the model, what EM estimates from it, and the subspace weighting that
+/// gave it (an N4SID start).
+struct Candidate {
+    model: LinearGaussianModel,
+    spec: LinearEmSpec,
+    weighting: Option<Weighting>,
+}
+
+impl Candidate {
+    /// An output-error model (`Q` held at zero): EM cannot move `A` (the smoothed states
+    /// are then a deterministic function of the parameters), so the likelihood is
+    /// maximised directly.
+    fn output_error(&self) -> bool {
+        self.spec.q == Covariance::Fixed && self.model.q().iter().all(|&v| v == 0.0)
+    }
+}
+
+/// The initial state the written model gives a record: the user's own (estimated or
+/// fixed `mu`, `P1`), else stationary for a stable `A` and diffuse otherwise.
+/// A stationary initial state that costs more than this many nats against the start's
+/// (at EM's estimate) is said: the record probably starts away from equilibrium.
+const TRANSIENT_NATS: f64 = 10.0;
+
+fn written_initial(
+    model: &LinearGaussianModel,
+    user_initial: bool,
+    chosen: InitialState,
+) -> InitialState {
+    if user_initial {
+        InitialState::Given
+    } else if chosen == InitialState::Diffuse {
+        InitialState::Diffuse
+    } else if spectral_radius(model.a()) < 1.0 {
+        InitialState::Stationary
+    } else {
+        InitialState::Diffuse
+    }
+}
+
+/// The starts of EM on the (detrended) training record, with the fixes and diagonal
+/// covariances applied to each and to its spec, and the starts' warnings: one N4SID fit
+/// per weighting of the start's choice (all three under `Auto`; a weighting that fails
+/// is left out unless all do), or the user's model.
+fn start_models(
     training: &Signals,
     options: &CheckedLinearFitOptions,
     order: Option<usize>,
-    spec: &mut LinearEmSpec,
-) -> Result<(LinearGaussianModel, Vec<LinearFitWarning>), LinearFitError> {
-    let given = match &options.start {
-        Start::N4sid { stable } => {
+    base: &LinearEmSpec,
+) -> Result<(Vec<Candidate>, Vec<LinearFitWarning>), LinearFitError> {
+    let given: Vec<(LinearGaussianModel, Option<Weighting>)> = match &options.start {
+        Start::N4sid { stable, weighting } => {
             let n = order.ok_or_else(|| LinearFitError::InvalidOption {
                 option: "order",
                 message: "an N4SID start needs a model order (--order n)".into(),
             })?;
-            let result = n4sid(
-                &training.record,
-                &N4sidOptions {
-                    order: Order::Fixed(n),
-                    stable: *stable,
-                    ..Default::default()
-                },
-            )?;
-            // linear EM holds S fixed; start from the subspace model without it
-            result
-                .model
-                .without_cross_covariance()
-                .to_builder()
-                .mu(DVector::zeros(result.model.n()))
-                .build()
-                .map_err(|source| LinearFitError::Kalman {
-                    context: "n4sid start",
-                    source,
-                })?
+            let weightings = match weighting {
+                WeightingChoice::Auto => vec![Weighting::Moesp, Weighting::N4sid, Weighting::Cva],
+                WeightingChoice::Fixed(w) => vec![*w],
+            };
+            let mut fits = Vec::new();
+            let mut first_error = None;
+            for w in weightings {
+                let fitted = n4sid(
+                    &training.record,
+                    &N4sidOptions {
+                        order: Order::Fixed(n),
+                        stable: *stable,
+                        weighting: w,
+                        ..Default::default()
+                    },
+                );
+                match fitted {
+                    // linear EM holds S fixed; start from the subspace model without it
+                    Ok(result) => fits.push((
+                        result
+                            .model
+                            .without_cross_covariance()
+                            .to_builder()
+                            .mu(DVector::zeros(result.model.n()))
+                            .build()
+                            .map_err(|source| LinearFitError::Kalman {
+                                context: "n4sid start",
+                                source,
+                            })?,
+                        Some(w),
+                    )),
+                    Err(e) => {
+                        first_error.get_or_insert(e);
+                    }
+                }
+            }
+            if fits.is_empty() {
+                return Err(first_error.expect("a weighting was tried").into());
+            }
+            fits
         }
-        Start::Model(model) => {
+        Start::Model { model, .. } => {
             if let Some(n) = order.filter(|&n| n != model.n()) {
                 return Err(LinearFitError::InvalidOption {
                     option: "order",
@@ -620,41 +812,58 @@ fn start_model(
                     ),
                 });
             }
-            model.as_ref().clone()
+            vec![(model.as_ref().clone(), None)]
         }
     };
-    let start = options
-        .initial
-        .apply_to_record(&given, &training.record)
-        .map_err(|source| LinearFitError::InvalidOption {
-            option: "initial",
-            message: source.to_string(),
-        })?;
-    // linear EM holds S; beside a non-zero S it cannot estimate Q or R. A start with
-    // an S (as n4sid writes) is started without it, as the N4SID start is, unless the
-    // user holds S on purpose.
     let mut warnings = Vec::new();
-    let start =
-        if start.has_cross_covariance() && !options.fixes.iter().any(|f| f.matrix == Matrix::S) {
-            warnings.push(LinearFitWarning::CrossCovarianceDropped);
+    let mut candidates = Vec::new();
+    // the training record's initial state: `--initial`'s, or the start file's own
+    let initial = match (&options.start, options.initial) {
+        (Start::Model { initial, .. }, InitialState::Given) => *initial,
+        (_, chosen) => chosen,
+    };
+    for (model, weighting) in given {
+        let start = initial
+            .apply_to_record(&model, &training.record)
+            .map_err(|source| LinearFitError::InvalidOption {
+                option: "initial",
+                message: source.to_string(),
+            })?;
+        // linear EM holds S; beside a non-zero S it cannot estimate Q or R. A start with
+        // an S (as n4sid writes) is started without it, as the N4SID start is, unless
+        // the user holds S on purpose.
+        let start = if start.has_cross_covariance()
+            && !options.fixes.iter().any(|f| f.matrix == Matrix::S)
+        {
+            if !warnings.contains(&LinearFitWarning::CrossCovarianceDropped) {
+                warnings.push(LinearFitWarning::CrossCovarianceDropped);
+            }
             start.without_cross_covariance()
         } else {
             start
         };
-    if options.estimate_initial && start.is_diffuse() {
-        return Err(LinearFitError::InvalidOption {
-            option: "estimate_initial",
-            message: "the initial state is diffuse (no mu or P1 to estimate); drop one of \
-                      --estimate-initial and the diffuse initial state"
-                .into(),
+        if options.estimate_initial && start.is_diffuse() {
+            return Err(LinearFitError::InvalidOption {
+                option: "estimate_initial",
+                message: "the initial state is diffuse (no mu or P1 to estimate); drop one of \
+                          --estimate-initial and the diffuse initial state"
+                    .into(),
+            });
+        }
+        let mut diagonal = options.diagonal.clone();
+        if training.record.y.nrows() > 1 && !options.full_r && !diagonal.contains(&Matrix::R) {
+            diagonal.push(Matrix::R);
+        }
+        let mut spec = base.clone();
+        let start = fix::apply(start, &mut spec, &options.fixes, &diagonal)?;
+        let model = spec.project(&start)?;
+        candidates.push(Candidate {
+            model,
+            spec,
+            weighting,
         });
     }
-    let mut diagonal = options.diagonal.clone();
-    if training.record.y.nrows() > 1 && !options.full_r && !diagonal.contains(&Matrix::R) {
-        diagonal.push(Matrix::R);
-    }
-    let start = fix::apply(start, spec, &options.fixes, &diagonal)?;
-    Ok((spec.project(&start)?, warnings))
+    Ok((candidates, warnings))
 }
 
 /// EM (SQUAREM or plain) from `start`: the run and its E-steps.

@@ -4,6 +4,7 @@
 use super::{Fix, LinearFitError, Matrix};
 use crate::{CheckedEmOptions, EmOptions};
 use sysid_kalman::{InitialState, LinearGaussianModel, TrendKind};
+use sysid_subspace::WeightingChoice;
 
 /// The most states an order range may reach.
 pub const MAX_ORDER: usize = 20;
@@ -13,13 +14,48 @@ pub const MAX_ORDER: usize = 20;
 #[non_exhaustive]
 pub enum Start {
     /// A subspace (N4SID) fit of the training record at the chosen order, its
-    /// cross-covariance `S` and initial mean set to zero.
+    /// cross-covariance `S` and initial mean set to zero. Under
+    /// [`WeightingChoice::Auto`] (the default) one fit per SVD weighting (MOESP, N4SID,
+    /// CVA): EM runs from each and the best by the written model's likelihood is
+    /// finished (the likelihood of a black-box model has several local maxima, and
+    /// the weightings often start in different ones).
     N4sid {
         /// Enforce a stable `A` in the subspace fit.
         stable: bool,
+        /// The SVD weighting, or all three.
+        weighting: WeightingChoice,
     },
-    /// A model of the user's (a model file, an earlier fit).
-    Model(Box<LinearGaussianModel>),
+    /// A model of the user's (a model file, an earlier fit), with the initial state its
+    /// file gives a record (`Given` for its own `mu` and `P1`): under
+    /// [`LinearFitOptions::initial`]'s default the training record starts so, and a
+    /// model given with its own initial state is written with it.
+    Model {
+        /// The model.
+        model: Box<LinearGaussianModel>,
+        /// Its file's initial state.
+        initial: InitialState,
+    },
+}
+
+impl Start {
+    /// A start from `model` with its own `mu` and `P1`.
+    pub fn model(model: LinearGaussianModel) -> Start {
+        Start::Model {
+            model: Box::new(model),
+            initial: InitialState::Given,
+        }
+    }
+
+    /// A start from a model file.
+    ///
+    /// # Errors
+    /// The file's model fails its checks.
+    pub fn of_file(spec: &sysid_kalman::ModelSpec) -> Result<Start, sysid_kalman::KalmanError> {
+        Ok(Start::Model {
+            model: Box::new(spec.build()?),
+            initial: spec.initial,
+        })
+    }
 }
 
 /// The order or orders fitted.
@@ -155,7 +191,10 @@ pub struct LinearFitOptions {
 impl Default for LinearFitOptions {
     fn default() -> Self {
         LinearFitOptions {
-            start: Start::N4sid { stable: false },
+            start: Start::N4sid {
+                stable: false,
+                weighting: WeightingChoice::Auto,
+            },
             order: OrderChoice::OfStart,
             fixes: Vec::new(),
             diagonal: Vec::new(),

@@ -18,17 +18,27 @@ pub enum LinearFitWarning {
         /// Whether a polish followed.
         polished: bool,
     },
-    /// The quasi-Newton polish stopped before converging (not at a boundary).
+    /// The scoring finish stopped before converging (not at a boundary).
     PolishShort {
         /// Why it stopped.
         status: String,
         /// What it gained (nats).
         gain: f64,
-        /// A black-box model (free `A` and `C`): its state basis, the scale of a single
-        /// state, is free, and only the initial state's held covariance ties it.
-        free_basis: bool,
+        /// Its estimate of what is left to gain (nats).
+        distance: f64,
+        /// Directions the data determine, of the free coordinates.
+        identified: usize,
+        /// The free coordinates.
+        coordinates: usize,
     },
-    /// The polish headed to a maximum on the boundary (a collapsing `R`).
+    /// The record starts far from the written model's stationary law: at EM's estimate,
+    /// the stationary initial state costs this many nats against the start's.
+    TransientStart {
+        /// EM's log-likelihood (the start's initial state) less the written model's,
+        /// both at EM's estimate.
+        nats: f64,
+    },
+    /// The finish headed to a maximum on the boundary (a collapsing `R`).
     PolishAtBoundary {
         /// Why it stopped.
         status: String,
@@ -90,32 +100,32 @@ impl std::fmt::Display for LinearFitWarning {
             LinearFitWarning::PolishShort {
                 status,
                 gain,
-                free_basis,
-            } => {
-                write!(
-                    f,
-                    "the quasi-Newton polish stopped before converging ({status}, after \
-                     gaining {gain:.3e} nats): the estimate is not the maximum; "
-                )?;
-                if *free_basis {
-                    f.write_str(
-                        "the state's basis is free (a black-box model: for one state, the \
-                         scale of x trades C against Q) and the search walks along it; fix \
-                         it (--fix C=1 for one state), or start the record from its \
-                         stationary law (--initial stationary)",
-                    )
-                } else {
-                    f.write_str(
-                        "fit again from the written model (--init FILE), or bound the \
-                         variances (--min-output-noise, --min-variance) if one is heading to \
-                         zero",
-                    )
-                }
-            }
+                distance,
+                identified,
+                coordinates,
+            } => write!(
+                f,
+                "the finish (scoring of the written model's likelihood) stopped before \
+                 converging ({status}, after gaining {gain:.3e} nats, about {distance:.1e} \
+                 left by its estimate): the estimate is not the maximum; {identified} of the \
+                 {coordinates} free coordinates are determined by the data, and a model with \
+                 many weakly determined directions (an order high for the record) converges \
+                 slowly: compare lower orders (--order 1..N) or fit again from the written \
+                 model (--init FILE)"
+            ),
+            LinearFitWarning::TransientStart { nats } => write!(
+                f,
+                "the record starts far from the model's stationary law: at EM's estimate, \
+                 the stationary initial state the model is written with scores {nats:.1} \
+                 nats below the start's; the fit maximised the written model's \
+                 likelihood, which bends the dynamics to explain the first steps: if the \
+                 record starts away from equilibrium, --initial diffuse treats its \
+                 initial state as unknown (and writes it so)"
+            ),
             LinearFitWarning::PolishAtBoundary { status } => write!(
                 f,
-                "the quasi-Newton polish {status}; bound the variances (--min-output-noise, \
-                 --min-variance) for an interior maximum"
+                "the finish stopped heading to a boundary ({status}): R collapses; bound \
+                 the variances (--min-output-noise, --min-variance) for an interior maximum"
             ),
             LinearFitWarning::Collapsed(part) => write!(
                 f,

@@ -434,12 +434,7 @@ fn fit_prepared(
     let mut total_e_steps = 0;
     let several = candidates.len() > 1;
     for candidate in candidates {
-        let coordinates = coordinate_count(&candidate.model, &candidate.spec);
-        let polish_on = match options.polish {
-            Switch::On => true,
-            Switch::Off => false,
-            Switch::Auto => coordinates > 0 && coordinates <= AUTO_MAX_FINISH_COORDINATES,
-        };
+        let polish_on = candidate.finish_on(options.polish);
         let (run, e_steps) = if candidate.output_error() {
             match sysid_kalman::loglik_dataset(&candidate.model, records) {
                 Ok(loglik) => (unmoved(candidate.model.clone(), loglik), 0),
@@ -496,18 +491,12 @@ fn fit_prepared(
         starts.clear();
     }
     let e_steps = total_e_steps;
+    let polish_on = candidate.finish_on(options.polish);
     let Candidate {
         model: start, spec, ..
     } = candidate;
     let coordinates = coordinate_count(&start, &spec);
     let feasible = coordinates > 0 && coordinates <= AUTO_MAX_COORDINATES;
-    let polish_on = match options.polish {
-        Switch::On => true,
-        Switch::Off => false,
-        Switch::Auto => coordinates > 0 && coordinates <= AUTO_MAX_FINISH_COORDINATES,
-    };
-    let output_error = spec.q == Covariance::Fixed && start.q().iter().all(|&v| v == 0.0);
-    let polish_on = polish_on || output_error;
     let interrupted = matches!(run.termination, Termination::Interrupted { .. });
     // the finish maximises the likelihood with the initial state the written model
     // gives a record, so that the log-likelihood reported is the file's
@@ -712,6 +701,19 @@ impl Candidate {
     /// maximised directly.
     fn output_error(&self) -> bool {
         self.spec.q == Covariance::Fixed && self.model.q().iter().all(|&v| v == 0.0)
+    }
+
+    /// Whether the scoring finish runs after EM: as `polish` says (`Auto`: for 1 to
+    /// [`AUTO_MAX_FINISH_COORDINATES`] free coordinates), and always for an output-error
+    /// model, which EM cannot move.
+    fn finish_on(&self, polish: Switch) -> bool {
+        let coordinates = coordinate_count(&self.model, &self.spec);
+        self.output_error()
+            || match polish {
+                Switch::On => true,
+                Switch::Off => false,
+                Switch::Auto => coordinates > 0 && coordinates <= AUTO_MAX_FINISH_COORDINATES,
+            }
     }
 }
 

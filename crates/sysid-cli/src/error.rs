@@ -118,6 +118,10 @@ pub enum CliError {
     },
     #[error("unknown system {name:?} (known: {known})")]
     UnknownSystem { name: String, known: String },
+    /// A fit setting the method that runs does not read, or one out of its range,
+    /// named by its flag.
+    #[error("{}", .0.describe(flag))]
+    Setting(#[from] sysid::em::SettingError),
     #[error("{option}: {message}")]
     BadOption {
         option: &'static str,
@@ -277,4 +281,9 @@ impl From<sysid_plot::PlotError> for CliError {
             other => CliError::Plot(other),
         }
     }
+}
+
+/// The command line's flag of a library setting: `max_iter` is `--max-iter`.
+pub fn flag(setting: &str) -> String {
+    format!("--{}", setting.replace('_', "-"))
 }

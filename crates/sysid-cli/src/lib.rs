@@ -398,11 +398,37 @@ fn command_line_error(e: &clap::Error) -> ExitCode {
     ExitCode::from(error::EXIT_BAD_INPUT)
 }
 
+/// The command line, with the flags of `sysid fit` that were given (not defaulted)
+/// recorded: a fit refuses a given flag its method does not read.
+fn parse(args: &[std::ffi::OsString]) -> Result<Cli, clap::Error> {
+    use clap::{CommandFactory, FromArgMatches};
+    let matches = Cli::command().try_get_matches_from(args)?;
+    let mut cli = Cli::from_arg_matches(&matches)?;
+    if let (Some(Command::Fit(fit)), Some(mut at)) =
+        (&mut cli.command, matches.subcommand_matches("fit"))
+    {
+        loop {
+            fit.given.extend(
+                at.ids()
+                    .filter(|id| {
+                        at.value_source(id.as_str()) == Some(clap::parser::ValueSource::CommandLine)
+                    })
+                    .map(|id| id.to_string()),
+            );
+            match at.subcommand() {
+                Some((_, inner)) => at = inner,
+                None => break,
+            }
+        }
+    }
+    Ok(cli)
+}
+
 /// Runs the command line on `args` (the program name first) and returns the exit code:
 /// 0 on success, 2 for bad input, 1 for other failures, with a one-line error on stderr.
 pub fn main_with(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
     let args: Vec<std::ffi::OsString> = args.into_iter().collect();
-    let cli = match Cli::try_parse_from(&args) {
+    let cli = match parse(&args) {
         Ok(cli) => cli,
         Err(e) => {
             if let Some(message) = fit_option_elsewhere(&args, &e) {

@@ -7,9 +7,9 @@ mod common;
 
 use common::{assert_ok, json_of, s, scratch_dir, sysid};
 use std::path::{Path, PathBuf};
-use sysid::em::FitRun;
 use sysid::em::affine::{AffineFitOptions, AffineMethod, fit_affine};
-use sysid::modelfile::ModelFile;
+use sysid::em::{FitRun, FitSettings};
+use sysid::modelfile::{Criterion, ModelFile};
 use sysid::models::{NlbenchAffine, NlbenchParams, WienerFitOptions, fit_wiener};
 use sysid::smc::{PathSmoother, Series};
 
@@ -78,41 +78,55 @@ fn fit_model_file_equals_the_library_for_each_method() {
             .replace("c*v", "k*c*v"),
     )
     .unwrap();
-    let cases = [
-        (oscillator(), "robust", AffineMethod::Robust),
-        (oscillator(), "em", AffineMethod::Em),
-        (product.clone(), "em", AffineMethod::Em),
-        (product.clone(), "robust", AffineMethod::Robust),
+    // each method with the settings it reads (the others are refused: fit_method.rs)
+    let read: [&[(&str, usize)]; 3] = [
+        &[("particles", 40), ("max_iter", 6), ("starts", 3)],
+        &[("particles", 40), ("max_iter", 6)],
+        &[("starts", 3)],
     ];
-    for (path, method, chosen) in cases {
+    let cases = [
+        (oscillator(), "robust", AffineMethod::Robust, read[0]),
+        (oscillator(), "em", AffineMethod::Em, read[1]),
+        (product.clone(), "em", AffineMethod::Em, read[1]),
+        (product.clone(), "robust", AffineMethod::Robust, read[2]),
+    ];
+    for (path, method, chosen, given) in cases {
         let out = dir.join("fit.toml");
-        let run = sysid(&[
-            "fit",
-            "--model",
-            s(&path),
-            "--data",
-            s(&data),
-            "--method",
-            method,
-            "--particles",
-            "40",
-            "--max-iter",
-            "6",
-            "--starts",
-            "3",
-            "--seed",
-            "9",
-            "--out",
-            s(&out),
-            "--force",
-            "--json",
-        ]);
+        let mut args = vec![
+            "fit".to_string(),
+            "--model".into(),
+            s(&path).into(),
+            "--data".into(),
+            s(&data).into(),
+            "--method".into(),
+            method.into(),
+            "--seed".into(),
+            "9".into(),
+            "--out".into(),
+            s(&out).into(),
+            "--force".into(),
+            "--json".into(),
+        ];
+        let mut settings = FitSettings {
+            method: Some(chosen),
+            ..FitSettings::default()
+        };
+        for &(name, value) in given {
+            args.extend([format!("--{}", name.replace('_', "-")), value.to_string()]);
+            match name {
+                "particles" => settings.particles = Some(value),
+                "max_iter" => settings.max_iter = Some(value),
+                _ => settings.starts = Some(value),
+            }
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let run = sysid(&args);
         let summary = json_of(&run);
         let file = ModelFile::read(&path).unwrap();
         let fit = file
             .fit(
                 series,
-                &options(chosen, 40, 6, 3).check().unwrap(),
+                &file.fit_method(Criterion::Likelihood, &settings).unwrap(),
                 &FitRun::new(9),
                 &mut (),
             )

@@ -18,9 +18,11 @@ pub mod linear;
 mod particle_pass;
 mod regression;
 pub mod runner;
+mod settings;
 
 pub use fit_run::FitRun;
 pub use runner::{
     CheckedEmOptions, EmAlgorithm, EmObserver, EmOptions, EmResult, IterationInfo, OptionsError,
     Termination, relative_change, remaining_gain, run_em,
 };
+pub use settings::{FitSettings, SettingError};

@@ -13,11 +13,11 @@
 //! simulation-error start, 2 of 8 starts reached the maximum (the others' simplexes
 //! stalled 150 to 450 nats below it).
 
+use crate::fit_method::DirectFitOptions;
 use crate::output_error::{SimulationFitOptions, at_bound, perturb};
 use crate::{FileFit, FileFitError, FileFitReport, FileFitWarning, ModelFile};
 use rand::RngExt;
 use sysid_em::FitRun;
-use sysid_em::affine::CheckedAffineFitOptions;
 use sysid_em::gradient::{DirectOptions, GradientModel, fit_direct};
 use sysid_pmcmc::{ModelFamily, Support};
 use sysid_smc::{Series, stream};
@@ -58,10 +58,9 @@ impl ModelFile {
     pub(crate) fn fit_direct(
         &self,
         data: Series<'_>,
-        options: &CheckedAffineFitOptions,
+        given: &DirectFitOptions,
         run: &FitRun<'_>,
     ) -> Result<FileFit, FileFitError> {
-        let given = options.options();
         let gradient = self.gradient();
         let supports = self.supports();
         let origin = gradient.unconstrained(&self.free_values());

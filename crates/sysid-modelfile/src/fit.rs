@@ -3,14 +3,16 @@
 //! the multi-start direct maximum-likelihood fit by default (`direct.rs`) or gradient
 //! EM from the file's values (`em`), with the report and the warnings the method gives.
 
+use crate::fit_method::{FileFitMethod, GradientFitOptions};
+use crate::output_error::{SimulationFit, SimulationFitOptions};
 use crate::{ExprAffine, ModelFile};
-use sysid_em::affine::{
-    AffineEmError, AffineFit, AffineMethod, CheckedAffineFitOptions, fit_affine,
-};
+use sysid_em::affine::{AffineEmError, AffineFit, CheckedAffineFitOptions, fit_affine};
 use sysid_em::gradient::{
     DirectFit, DirectWarning, GradientEm, GradientEmError, GradientModel, MStepOptions,
 };
-use sysid_em::{EmObserver, EmResult, FitRun, IterationInfo, Termination, run_em};
+use sysid_em::{
+    EmObserver, EmOptions, EmResult, FitRun, IterationInfo, SettingError, Termination, run_em,
+};
 use sysid_smc::{FfbsiReject, ModelError, Series};
 
 /// How a model file was fitted.
@@ -34,6 +36,8 @@ pub enum FileFitReport {
         /// `(loglik, free values)` after every iteration.
         iterates: Vec<(f64, Vec<f64>)>,
     },
+    /// The simulation-error fit ([`ModelFile::fit_simulation_error`]).
+    Simulation(SimulationFit),
 }
 
 /// The result of [`ModelFile::fit`].
@@ -50,23 +54,26 @@ pub struct FileFit {
 }
 
 impl FileFit {
-    /// The method's name: `robust`, `em`, `psaem`, `direct` or `gradient-em`.
+    /// The method's name: `robust`, `em`, `psaem`, `direct`, `gradient-em` or
+    /// `simulation-error`.
     pub fn method(&self) -> &'static str {
         match &self.report {
             FileFitReport::Affine(fit) => fit.method.name(),
             FileFitReport::Direct { .. } => "direct",
             FileFitReport::Gradient { .. } => "gradient-em",
+            FileFitReport::Simulation(_) => "simulation-error",
         }
     }
 
     /// The estimate's log-likelihood estimate (see [`AffineFit::loglik`]; for the
     /// direct fit the mean of independent filters at the estimate; for gradient EM the
-    /// last E-step's).
+    /// last E-step's; none for the simulation-error fit).
     pub fn loglik(&self) -> Option<f64> {
         match &self.report {
             FileFitReport::Affine(fit) => fit.loglik(),
             FileFitReport::Direct { fit, .. } => Some(fit.loglik),
             FileFitReport::Gradient { result, .. } => result.loglik,
+            FileFitReport::Simulation(_) => None,
         }
     }
 
@@ -88,6 +95,7 @@ impl FileFit {
             FileFitReport::Gradient { result, .. } => {
                 matches!(result.termination, Termination::Interrupted { .. })
             }
+            FileFitReport::Simulation(fit) => fit.interrupted,
         }
     }
 }
@@ -222,6 +230,9 @@ pub enum FileFitError {
         /// Why it is not affine.
         why: String,
     },
+    /// A setting the method that runs does not read, or one out of its range.
+    #[error("{0}")]
+    Setting(#[from] SettingError),
     /// An option out of its range for this model.
     #[error("{name}: {reason}")]
     InvalidOption {
@@ -273,25 +284,25 @@ impl<T, F: Fn(&T) -> Vec<f64>> EmObserver<T> for Values<'_, '_, F> {
 }
 
 impl ModelFile {
-    /// Fits the free parameters to `data` from their values in the file: closed-form
-    /// particle EM by the method of `options` when the equations are affine in them
-    /// ([`fit_affine`], with the file's own choice of free noise blocks), otherwise
-    /// `robust` (the default) is the multi-start direct maximum-likelihood fit
-    /// ([`sysid_em::gradient::fit_direct`]: `starts` starts, each free value of the
-    /// file times `U[0.5, 1.5]`, explored by a 1000-particle filter, the best finished
-    /// by a `polish_particles` one) and `em` is gradient EM from the file's values
-    /// (rejection FFBSi with `particles` paths, analytic gradients). `observer` sees
-    /// the free values after every EM iteration (the direct fit has none); `run` gives
+    /// Fits the free parameters to `data` from their values in the file by `method`
+    /// ([`ModelFile::fit_method`] makes it from a criterion and the user's settings):
+    /// closed-form particle EM ([`fit_affine`], with the file's own choice of free
+    /// noise blocks); the multi-start direct maximum-likelihood fit
+    /// ([`sysid_em::gradient::fit_direct`]: the starts explored by a 1000-particle
+    /// filter, the best finished by a `polish_particles` one); gradient EM from the
+    /// file's values (rejection FFBSi, analytic gradients); or the simulation-error fit
+    /// ([`ModelFile::fit_simulation_error`]). `observer` sees the free values after
+    /// every EM iteration (the direct and simulation-error fits have none); `run` gives
     /// the seed and the stop.
     ///
     /// # Errors
-    /// [`FileFitError::NothingFree`]; [`FileFitError::NotAffine`] for PSAEM on a model
-    /// that is not affine; the setup errors of the method. A failure inside EM's
-    /// iterations is the result's [`Termination::Error`].
+    /// [`FileFitError::NothingFree`]; [`FileFitError::NotAffine`] for closed-form
+    /// particle EM on a model that is not affine; the setup errors of the method. A
+    /// failure inside EM's iterations is the result's [`Termination::Error`].
     pub fn fit(
         &self,
         data: Series<'_>,
-        options: &CheckedAffineFitOptions,
+        method: &FileFitMethod,
         run: &FitRun<'_>,
         observer: &mut dyn EmObserver<Vec<f64>>,
     ) -> Result<FileFit, FileFitError> {
@@ -300,12 +311,31 @@ impl ModelFile {
                 origin: self.origin().to_string(),
             });
         }
-        let mut fit = match self.affine() {
-            Some(affine) => self.fit_affine(&affine, data, options, run, observer),
-            None if options.options().method == AffineMethod::Robust => {
-                self.fit_direct(data, options, run)
+        let mut fit = match method {
+            FileFitMethod::ParticleEm(options) => {
+                let affine = self.affine().ok_or_else(|| FileFitError::NotAffine {
+                    method: options.options().method.name().to_string(),
+                    origin: self.origin().to_string(),
+                    why: self.why_not_affine().unwrap_or_default(),
+                })?;
+                self.fit_affine(&affine, data, options, run, observer)
             }
-            None => self.fit_gradient(data, options, run, observer),
+            FileFitMethod::Direct(options) => self.fit_direct(data, options, run),
+            FileFitMethod::GradientEm(options) => self.fit_gradient(data, options, run, observer),
+            FileFitMethod::Simulation(options) => {
+                let options = SimulationFitOptions {
+                    seed: run.seed,
+                    ..options.clone()
+                };
+                let fit = self.fit_simulation_error(data, &options, run.stop)?;
+                // its own check of separability is on the estimate's Jacobian
+                return Ok(FileFit {
+                    fitted: fit.fitted.clone(),
+                    estimate: fit.estimate.clone(),
+                    warnings: fit.warnings.clone(),
+                    report: FileFitReport::Simulation(fit),
+                });
+            }
         }?;
         if let Some(found) = fit.fitted.inseparable_on(data) {
             fit.warnings.push(FileFitWarning::Inseparable {
@@ -361,35 +391,31 @@ impl ModelFile {
     fn fit_gradient(
         &self,
         data: Series<'_>,
-        options: &CheckedAffineFitOptions,
+        options: &GradientFitOptions,
         run: &FitRun<'_>,
         observer: &mut dyn EmObserver<Vec<f64>>,
     ) -> Result<FileFit, FileFitError> {
-        let given = options.options();
-        if given.method == AffineMethod::Psaem {
-            return Err(FileFitError::NotAffine {
-                method: given.method.name().to_string(),
-                origin: self.origin().to_string(),
-                why: self.why_not_affine().unwrap_or_default(),
-            });
+        let em_options = EmOptions {
+            max_iterations: options.iterations,
+            tol: 0.0,
+            ..EmOptions::default()
         }
-        if given.particles < 2 {
-            return Err(FileFitError::InvalidOption {
-                name: "particles",
-                reason: "must be at least 2".into(),
-            });
-        }
+        .check()
+        .map_err(|e| SettingError::Invalid {
+            setting: "max_iter",
+            reason: e.to_string(),
+        })?;
         let gradient = self.gradient();
         let start = gradient.unconstrained(&self.free_values());
         let smoother = FfbsiReject {
-            paths: given.particles,
+            paths: options.particles,
             max_trials: None,
             parallel: false,
         };
         let mut em = GradientEm::new(
             &gradient,
             data,
-            given.particles,
+            options.particles,
             smoother,
             MStepOptions::default(),
             run.seed,
@@ -400,7 +426,7 @@ impl ModelFile {
             values: |z: &Vec<f64>| gradient.constrained(z),
             rows: Vec::new(),
         };
-        let result = run_em(&mut em, start, options.em(), &mut values);
+        let result = run_em(&mut em, start, &em_options, &mut values);
         let estimate = gradient.constrained(&result.estimate);
         let mut warnings = settling(&self.free_names(), &values.rows);
         let start_values = self.free_values();

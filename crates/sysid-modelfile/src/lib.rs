@@ -68,6 +68,7 @@ pub mod conjugate;
 mod direct;
 pub mod expr;
 mod fit;
+mod fit_method;
 pub mod gaussian;
 pub mod gradient;
 pub mod output_error;
@@ -82,6 +83,9 @@ mod write;
 pub use affine::ExprAffine;
 pub use conjugate::AffineConjugate;
 pub use fit::{FileFit, FileFitError, FileFitReport, FileFitWarning};
+pub use fit_method::{
+    Criterion, DirectFitOptions, FileFitMethod, GradientFitOptions, fit_defaults,
+};
 pub use gaussian::{Gaussian, GaussianModel, GaussianSmc};
 pub use gradient::ExprGradient;
 pub use output_error::{

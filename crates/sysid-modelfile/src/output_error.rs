@@ -59,7 +59,7 @@ pub struct SimulationFitOptions {
 impl Default for SimulationFitOptions {
     fn default() -> Self {
         SimulationFitOptions {
-            starts: 8,
+            starts: sysid_em::affine::AffineFitOptions::default().starts,
             spread: 0.3,
             patience: 100,
             estimate_initial_state: true,

@@ -6,9 +6,8 @@
 
 use nalgebra::{DMatrix, DVector, dmatrix};
 use sysid_em::FitRun;
-use sysid_em::affine::AffineFitOptions;
 use sysid_kalman::{KalmanWorkspace, LinearGaussianModel, Record};
-use sysid_modelfile::{FileFitReport, ModelFile};
+use sysid_modelfile::{DirectFitOptions, FileFitMethod, FileFitReport, ModelFile};
 use sysid_smc::{Series, stream};
 
 /// `x' = tanh(s) x + w`, `y = x + e`: linear in the state, not affine in `s`. The
@@ -106,11 +105,11 @@ fn record_and_series() -> (Record, Vec<f64>) {
     (simulation.record, y)
 }
 
-fn options(starts: usize, polish_particles: usize) -> sysid_em::affine::CheckedAffineFitOptions {
-    let mut options = AffineFitOptions::default();
-    options.starts = starts;
-    options.polish_particles = polish_particles;
-    options.check().unwrap()
+fn options(starts: usize, polish_particles: usize) -> FileFitMethod {
+    FileFitMethod::Direct(DirectFitOptions {
+        starts,
+        polish_particles,
+    })
 }
 
 /// The exact standard errors of `(s, q, r)` at the exact maximum: the observed

@@ -283,11 +283,21 @@ x = { mean = 2, variance = 0.1 }
     let y: Vec<f64> = (0..30)
         .map(|t| 2.0 + 0.1 * ((t as f64) * 0.9).sin())
         .collect();
-    let mut options = sysid_em::affine::AffineFitOptions::default()
-        .with_method(sysid_em::affine::AffineMethod::Em);
-    options.particles = 20;
-    options.iterations = 3;
-    let options = options.check().unwrap();
+    let options = file
+        .fit_method(
+            sysid_modelfile::Criterion::Likelihood,
+            &sysid_em::FitSettings {
+                method: Some(sysid_em::affine::AffineMethod::Em),
+                particles: Some(20),
+                max_iter: Some(3),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    assert!(matches!(
+        options,
+        sysid_modelfile::FileFitMethod::GradientEm(_)
+    ));
     let fit = file
         .fit(
             Series::new(&y, 1).unwrap(),

@@ -6,7 +6,7 @@
 use sysid_em::FitRun;
 use sysid_em::affine::{AffineFitOptions, AffineMethod, AffineModel, CoefficientSlot};
 use sysid_em::linear::Covariance;
-use sysid_modelfile::ModelFile;
+use sysid_modelfile::{FileFitMethod, ModelFile};
 use sysid_smc::Series;
 
 /// Two tanks; the outflow `a1` of the first is the inflow of the second; `h1`'s noise
@@ -126,7 +126,12 @@ fn the_closed_form_fit_runs_and_keeps_the_constraints() {
     options.particles = 50;
     options.iterations = 40;
     let fit = start
-        .fit(series, &options.check().unwrap(), &FitRun::new(1), &mut ())
+        .fit(
+            series,
+            &FileFitMethod::ParticleEm(options.check().unwrap()),
+            &FitRun::new(1),
+            &mut (),
+        )
         .unwrap();
     assert_eq!(fit.method(), "em");
     let [k, a1, a2, q2, r] = fit.estimate[..] else {
@@ -283,7 +288,7 @@ x = {{ mean = 0, variance = 1 }}
     options.method = AffineMethod::Em;
     options.particles = 50;
     options.iterations = 30;
-    let options = options.check().unwrap();
+    let options = FileFitMethod::ParticleEm(options.check().unwrap());
     let fit = |bounds: &str| {
         ModelFile::parse(&ar(bounds), "ar.toml")
             .unwrap()

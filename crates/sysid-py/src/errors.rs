@@ -11,6 +11,9 @@ pub(crate) enum Failure {
     Data(String),
     /// A bad option (`OptionError`, a `ValueError`), named as the Python keyword.
     Option { name: String, message: String },
+    /// A keyword the method that runs does not read (`OptionError`); the message names
+    /// it.
+    Refused { name: String, message: String },
     /// A model file that cannot be read (`ModelFileError`).
     ModelFile {
         message: String,
@@ -27,6 +30,20 @@ impl Failure {
         Failure::Option {
             name: name.into(),
             message: message.into(),
+        }
+    }
+
+    /// A library setting refused or out of range, named as the Python keyword (the
+    /// library's setting names are the keywords).
+    pub fn setting(e: &sysid::em::SettingError) -> Failure {
+        match e {
+            sysid::em::SettingError::Invalid { setting, reason } => {
+                Failure::option(setting, reason.clone())
+            }
+            other => Failure::Refused {
+                name: other.setting().to_string(),
+                message: other.describe(str::to_string),
+            },
         }
     }
 
@@ -54,6 +71,9 @@ impl Failure {
             Failure::Option { name, message } => errors
                 .getattr("OptionError")?
                 .call1((format!("{name}: {message}"), name))?,
+            Failure::Refused { name, message } => {
+                errors.getattr("OptionError")?.call1((message, name))?
+            }
             Failure::ModelFile {
                 message,
                 origin,

@@ -7,20 +7,21 @@ use crate::run::{Progress, supervise};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sysid::em::FitRun;
-use sysid::em::affine::{AffineFitOptions, AffineMethod};
+use sysid::em::affine::AffineMethod;
+use sysid::em::{FitRun, FitSettings};
 use sysid::kalman::Record;
-use sysid::modelfile::{ExprSmc, ModelFile};
+use sysid::modelfile::{
+    Criterion, ExprSmc, FileFit, FileFitError, FileFitMethod, FileFitReport, ModelFile,
+};
 use sysid::pmcmc::{Chain, ChainReport, ChainRun, IndependentPrior, PmmhOptions, pmmh};
 use sysid::smc::StateSpace as _;
-use sysid::smc::{
-    FilterDiagnostics, FilterOptions, ParticleFilter, PathSmoother, Resampling, Series,
-};
+use sysid::smc::{FilterDiagnostics, FilterOptions, ParticleFilter, Resampling, Series};
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CompiledModel>()?;
     m.add_function(wrap_pyfunction!(particle_filter, m)?)?;
     m.add_function(wrap_pyfunction!(fit_model, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_defaults, m)?)?;
     m.add_function(wrap_pyfunction!(pmmh_model, m)?)?;
     m.add_function(wrap_pyfunction!(chain_report, m)?)?;
     Ok(())
@@ -245,75 +246,129 @@ fn option_failure(e: &sysid::smc::SmcError) -> Failure {
 }
 
 /// `sysid fit --model`: the estimates, the fitted file's text, and the run's report.
+/// A keyword left `None` takes the default of the method that runs; a keyword that
+/// method does not read is refused (the library's [`ModelFile::fit_method`]).
 #[pyfunction]
-#[pyo3(signature = (model, y, u=None, method="robust", particles=100, smoother="tanizaki",
-    iterations=500, starts=8, seed=1, progress=None, threads=None, polish=true,
-    extrapolate=true))]
+#[pyo3(signature = (model, y, u=None, criterion="likelihood", method=None, particles=None,
+    smoother=None, max_iter=None, starts=None, polish=None, extrapolate=None, patience=None,
+    spread=None, seed=1, progress=None, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit_model<'py>(
     py: Python<'py>,
     model: &CompiledModel,
     y: PyReadonlyArray2<'_, f64>,
     u: Option<PyReadonlyArray2<'_, f64>>,
-    method: &str,
-    particles: usize,
-    smoother: &str,
-    iterations: usize,
-    starts: usize,
+    criterion: &str,
+    method: Option<&str>,
+    particles: Option<usize>,
+    smoother: Option<String>,
+    max_iter: Option<usize>,
+    starts: Option<usize>,
+    polish: Option<bool>,
+    extrapolate: Option<bool>,
+    patience: Option<usize>,
+    spread: Option<f64>,
     seed: u64,
     progress: Option<Bound<'py, PyAny>>,
     threads: Option<usize>,
-    polish: bool,
-    extrapolate: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let chosen = AffineMethod::from_name(method).ok_or_else(|| {
-        Failure::option(
-            "method",
-            format!(
-                "unknown method {method:?} (known: {})",
-                AffineMethod::NAMES.join(", ")
-            ),
-        )
-    })?;
-    let mut options = AffineFitOptions::default().with_method(chosen);
-    options.particles = particles;
-    options.smoother = PathSmoother::for_em(smoother, particles).map_err(|e| match e {
-        sysid::smc::SmcError::InvalidOption { reason, .. } => Failure::option("smoother", reason),
-        other => Failure::sysid(other),
-    })?;
-    options.iterations = iterations;
-    options.starts = starts;
-    if !polish {
-        options.polish_particles = 0;
-    }
-    options.extrapolate = extrapolate;
-    let options = options.check().map_err(|e| match e {
-        sysid::em::affine::AffineEmError::InvalidOption { name, reason } => {
-            Failure::option(name, reason)
-        }
-        other => Failure::sysid(other),
-    })?;
+    let criterion: Criterion = criterion
+        .parse()
+        .map_err(|m| Failure::option("criterion", m))?;
+    let method = method
+        .map(str::parse::<AffineMethod>)
+        .transpose()
+        .map_err(|m| Failure::option("method", m))?;
+    let settings = FitSettings {
+        method,
+        particles,
+        smoother,
+        max_iter,
+        starts,
+        polish,
+        extrapolate,
+        patience,
+        spread,
+    };
+    let chosen = model
+        .file
+        .fit_method(criterion, &settings)
+        .map_err(|e| fit_failure(&e))?;
     let data = record(&y, u.as_ref())?;
     model.check(&data)?;
     let series = series_of(&data)?;
     let progress = Progress::of(progress, "fit")?;
-    let run = supervise(py, threads, &progress, iterations as u64, |control| {
+    let steps = match &chosen {
+        FileFitMethod::ParticleEm(options) => options.options().iterations,
+        FileFitMethod::GradientEm(options) => options.iterations,
+        _ => 1,
+    };
+    let run = supervise(py, threads, &progress, steps as u64, |control| {
         let stop = || control.stopped();
         let fit_run = FitRun::new(seed).stopped_by(&stop);
         model
             .file
-            .fit(series, &options, &fit_run, &mut &*control)
-            .map_err(|e| match e {
-                sysid::modelfile::FileFitError::InvalidOption { name, reason } => {
-                    Failure::option(name, reason)
-                }
-                sysid::modelfile::FileFitError::NotAffine { .. } => {
-                    Failure::option("method", e.to_string())
-                }
-                other => Failure::sysid(other),
-            })
+            .fit(series, &chosen, &fit_run, &mut &*control)
+            .map_err(|e| fit_failure(&e))
     })?;
     let fit = run.value?;
+    let out = match (&fit.report, &chosen) {
+        (FileFitReport::Simulation(report), FileFitMethod::Simulation(options)) => {
+            crate::simulation::simulation_report(py, model, report, seed, options.starts)?
+        }
+        _ => likelihood_report(py, model, &fit, seed, steps_particles(&chosen))?,
+    };
+    crate::run::result_or_stop(py, run.stopped_by, out)
+}
+
+/// The library's default of every setting of `fit` (what a keyword left `None`
+/// becomes, and what `sysid fit --help` shows).
+#[pyfunction]
+fn fit_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = sysid::modelfile::fit_defaults();
+    let out = PyDict::new(py);
+    out.set_item("method", d.method.map(|m| m.name()))?;
+    out.set_item("particles", d.particles)?;
+    out.set_item("smoother", d.smoother)?;
+    out.set_item("max_iter", d.max_iter)?;
+    out.set_item("starts", d.starts)?;
+    out.set_item("polish", d.polish)?;
+    out.set_item("extrapolate", d.extrapolate)?;
+    out.set_item("patience", d.patience)?;
+    out.set_item("spread", d.spread)?;
+    Ok(out)
+}
+
+/// The particles a likelihood method's report names (its filter's; the direct
+/// search's finishing filter's).
+fn steps_particles(method: &FileFitMethod) -> usize {
+    match method {
+        FileFitMethod::ParticleEm(options) => options.options().particles,
+        FileFitMethod::GradientEm(options) => options.particles,
+        FileFitMethod::Direct(options) => options.polish_particles,
+        FileFitMethod::Simulation(_) => 0,
+    }
+}
+
+/// A fit's failure, named by the keyword at fault.
+fn fit_failure(e: &FileFitError) -> Failure {
+    match e {
+        FileFitError::Setting(setting) => Failure::setting(setting),
+        FileFitError::InvalidOption { name, reason } => Failure::option(name, reason.clone()),
+        FileFitError::NotAffine { .. } => Failure::option("method", e.to_string()),
+        other => Failure::sysid(other),
+    }
+}
+
+/// The report of a likelihood fit: the estimates, the log-likelihood, the warnings and
+/// the fitted file's text.
+fn likelihood_report<'py>(
+    py: Python<'py>,
+    model: &CompiledModel,
+    fit: &FileFit,
+    seed: u64,
+    particles: usize,
+) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     out.set_item("method", fit.method())?;
     out.set_item("names", model.file.free_names())?;
@@ -336,7 +391,7 @@ fn fit_model<'py>(
         ),
     ];
     out.set_item("text", fit.fitted.to_toml(&metadata))?;
-    crate::run::result_or_stop(py, run.stopped_by, out)
+    Ok(out)
 }
 
 /// `sysid pmmh --model`: the chains (JSON, as `--out` writes them) of chains

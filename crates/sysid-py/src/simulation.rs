@@ -5,16 +5,14 @@
 use crate::data::record;
 use crate::errors::Failure;
 use crate::particle::{CompiledModel, series_of};
-use crate::run::{Progress, supervise};
 use numpy::{PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sysid::modelfile::{FileFitError, InitialState, SimulationFitOptions};
+use sysid::modelfile::{InitialState, SimulationFit};
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate_noise_free, m)?)?;
     m.add_function(wrap_pyfunction!(compare_simulation, m)?)?;
-    m.add_function(wrap_pyfunction!(fit_simulation, m)?)?;
     m.add_function(wrap_pyfunction!(predict_particles, m)?)?;
     Ok(())
 }
@@ -112,44 +110,15 @@ fn compare_simulation<'py>(
     Ok(out)
 }
 
-/// `sysid fit --model --criterion simulation`.
-#[pyfunction]
-#[pyo3(signature = (model, y, u=None, starts=8, spread=0.3, patience=100, seed=1,
-    progress=None, threads=None))]
-#[allow(clippy::too_many_arguments)]
-fn fit_simulation<'py>(
+/// The report of `sysid fit --model --criterion simulation`: the estimate, its
+/// runs and the fitted file's text.
+pub(crate) fn simulation_report<'py>(
     py: Python<'py>,
     model: &CompiledModel,
-    y: PyReadonlyArray2<'_, f64>,
-    u: Option<PyReadonlyArray2<'_, f64>>,
-    starts: usize,
-    spread: f64,
-    patience: usize,
+    fit: &SimulationFit,
     seed: u64,
-    progress: Option<Bound<'py, PyAny>>,
-    threads: Option<usize>,
+    starts: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let data = record(&y, u.as_ref())?;
-    model.check(&data)?;
-    let series = series_of(&data)?;
-    let options = SimulationFitOptions {
-        starts,
-        spread,
-        patience,
-        seed,
-        ..SimulationFitOptions::default()
-    };
-    let progress = Progress::of(progress, "fit")?;
-    let run = supervise(py, threads, &progress, 1, |control| {
-        let stop = || control.stopped();
-        let fit = model.file.fit_simulation_error(series, &options, &stop);
-        control.tick();
-        fit.map_err(|e| match e {
-            FileFitError::InvalidOption { name, reason } => Failure::option(name, reason),
-            other => Failure::sysid(other),
-        })
-    })?;
-    let fit = run.value?;
     let out = PyDict::new(py);
     out.set_item("names", model.file.free_names())?;
     out.set_item("estimate", fit.estimate.clone())?;
@@ -175,7 +144,7 @@ fn fit_simulation<'py>(
         ("rms".to_string(), format!("{}", fit.rms[0])),
     ];
     out.set_item("text", fit.fitted.to_toml(&metadata))?;
-    crate::run::result_or_stop(py, run.stopped_by, out)
+    Ok(out)
 }
 
 /// `sysid predict --model`: the k-step particle predictions, `(mean, sd)` as `T x p`

@@ -46,6 +46,54 @@ impl AffineMethod {
             AffineMethod::Psaem => Self::NAMES[2],
         }
     }
+
+    /// What it is, for a message.
+    pub fn description(&self) -> &'static str {
+        match self {
+            AffineMethod::Robust => "the robust particle EM driver (method robust)",
+            AffineMethod::Em => "plain particle EM (method em)",
+            AffineMethod::Psaem => "particle SAEM (method psaem)",
+        }
+    }
+
+    /// The settings ([`crate::FitSettings`]) it reads: PSAEM has its own conditional
+    /// particle filter (no `smoother`); only the robust driver explores `starts`,
+    /// polishes and extrapolates.
+    pub fn reads(&self) -> &'static [&'static str] {
+        match self {
+            AffineMethod::Robust => &[
+                "method",
+                "particles",
+                "smoother",
+                "max_iter",
+                "starts",
+                "polish",
+                "extrapolate",
+            ],
+            AffineMethod::Em => &["method", "particles", "smoother", "max_iter"],
+            AffineMethod::Psaem => &["method", "particles", "max_iter"],
+        }
+    }
+}
+
+impl std::fmt::Display for AffineMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for AffineMethod {
+    type Err = String;
+
+    /// A method by its name; the error lists the names.
+    fn from_str(name: &str) -> Result<Self, String> {
+        AffineMethod::from_name(name).ok_or_else(|| {
+            format!(
+                "unknown method {name:?} (known: {})",
+                AffineMethod::NAMES.join(", ")
+            )
+        })
+    }
 }
 
 /// Options of [`fit_affine`]; [`AffineFitOptions::check`] gives the only form it takes.
@@ -62,7 +110,8 @@ pub struct AffineFitOptions {
     /// The E-step smoother of `em` and `robust` (PSAEM uses its own). Default
     /// Tanizaki's.
     pub smoother: PathSmoother,
-    /// EM or PSAEM iterations, or the robust driver's refinement iterations. Default 100.
+    /// EM or PSAEM iterations, or the robust driver's refinement iterations. Default
+    /// 500.
     pub iterations: usize,
     /// Starts the robust driver explores. Default [`RobustOptions::default`]'s.
     pub starts: usize,
@@ -82,7 +131,7 @@ impl Default for AffineFitOptions {
             spec: AffineEmSpec::default(),
             particles: 100,
             smoother: PathSmoother::for_em("tanizaki", 100).expect("a known smoother"),
-            iterations: 100,
+            iterations: 500,
             starts: RobustOptions::default().starts,
             polish_particles: RobustOptions::default().polish_particles,
             extrapolate: RobustOptions::default().extrapolate,

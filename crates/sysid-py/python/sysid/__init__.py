@@ -14,14 +14,14 @@ from ._errors import (DataError, ModelFileError, OptionError, SysidError, SysidW
 from ._linear import (Comparison, Forecast, LinearFitResults, LinearModel, N4sidResults,
                       Predictions, ResidualTests, fit_lti, loglik, n4sid)
 from ._particle import (Chains, FilterResults, ModelFile, ModelFitResults,
-                        SimulationComparison, SimulationFitResults, fit, particle_filter,
-                        pmmh)
+                        SimulationComparison, SimulationFitResults, fit, fit_defaults,
+                        particle_filter, pmmh)
 from ._sysid import __version__
 
 __all__ = [
     "Chains", "Comparison", "DataError", "Forecast", "Predictions", "ResidualTests", "FilterResults", "LinearFitResults", "LinearModel",
     "ModelFile", "ModelFileError", "ModelFitResults", "N4sidResults", "OptionError",
     "SimulationComparison", "SimulationFitResults",
-    "SysidError", "SysidWarning", "UntrustedResultError", "__version__", "fit", "fit_lti",
+    "SysidError", "SysidWarning", "UntrustedResultError", "__version__", "fit", "fit_defaults", "fit_lti",
     "loglik", "n4sid", "particle_filter", "pmmh",
 ]

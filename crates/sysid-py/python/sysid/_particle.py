@@ -253,10 +253,16 @@ class SimulationFitResults:
         return isinstance(other, SimulationFitResults) and _same(self._raw, other._raw)
 
 
-def fit(model, data, u=None, *, criterion="likelihood", method="robust", particles=100,
-        smoother="tanizaki", max_iter=500, starts=8, seed=1, spread=0.3, patience=100,
-        time=None, progress=None, threads=None, strict=False, polish=True,
-        extrapolate=True):
+def fit_defaults():
+    """The default of every keyword of ``fit`` that is ``None`` in its signature: the
+    library's, as ``sysid fit --help`` shows them (a dict)."""
+    return dict(_sysid.fit_defaults())
+
+
+def fit(model, data, u=None, *, criterion="likelihood", method=None, particles=None,
+        smoother=None, max_iter=None, starts=None, seed=1, spread=None, patience=None,
+        time=None, progress=None, threads=None, strict=False, polish=None,
+        extrapolate=None):
     """``sysid fit --model``. ``criterion="likelihood"`` (the default): maximum
     likelihood for a model file's free parameters, by the method the command line
     chooses: closed-form particle EM when the equations are affine in them (``method``
@@ -267,26 +273,26 @@ def fit(model, data, u=None, *, criterion="likelihood", method="robust", particl
     the noise-free model's simulation error minimised over the free parameters and the
     initial state (Levenberg-Marquardt from the file's values and ``starts - 1``
     perturbations, each value times ``exp(spread N(0, 1))``); returns
-    ``SimulationFitResults``. ``polish`` (robust method): maximise a 10 000-particle
-    likelihood directly from the EM estimate (``--polish off`` is ``polish=False``).
-    ``extrapolate`` (robust method): the refinement jumps along its own drift every 25
-    iterations, a jump kept only when the ranking filter gains a nat (``--extrapolate
-    off`` is ``extrapolate=False``)."""
+    ``SimulationFitResults``.
+
+    A keyword left ``None`` takes the default of the method that runs: the library's,
+    which ``sysid.fit_defaults()`` returns and ``sysid fit --help`` shows. A keyword
+    the method does not read raises ``OptionError``
+    naming the method: ``particles`` for the direct search, ``starts`` for ``em``,
+    ``max_iter`` for ``criterion="simulation"``. ``polish`` (robust method and the
+    direct search): finish by maximising a 10 000-particle likelihood directly.
+    ``extrapolate`` (robust particle EM): the refinement jumps along its own drift
+    every 25 iterations, a jump kept only when the ranking filter gains a nat."""
     model = _model(model)
     s = model._signals(data, u, time)
-    if criterion == "simulation":
-        with partial_as(lambda raw: SimulationFitResults(raw, model.origin)):
-            raw = _sysid.fit_simulation(model._compiled, s.y, s.u, starts, spread, patience,
-                                        seed, progress, threads)
-        return report(SimulationFitResults(raw, model.origin), strict, "fit")
-    if criterion != "likelihood":
-        raise OptionError(f"{criterion!r} is not a criterion: use likelihood or simulation",
-                          "criterion")
-    with partial_as(lambda raw: ModelFitResults(raw, model.origin)):
-        raw = _sysid.fit_model(model._compiled, s.y, s.u, method, particles, smoother,
-                               max_iter, starts, seed, progress, threads, bool(polish),
-                               bool(extrapolate))
-    return report(ModelFitResults(raw, model.origin), strict, "fit")
+    result = SimulationFitResults if criterion == "simulation" else ModelFitResults
+    with partial_as(lambda raw: result(raw, model.origin)):
+        raw = _sysid.fit_model(model._compiled, s.y, s.u, criterion, method, particles,
+                               smoother, max_iter, starts,
+                               None if polish is None else bool(polish),
+                               None if extrapolate is None else bool(extrapolate),
+                               patience, spread, seed, progress, threads)
+    return report(result(raw, model.origin), strict, "fit")
 
 
 class Chains:

@@ -26,7 +26,6 @@ use sysid::em::{EmObserver, EmResult, FitRun, Termination};
 use sysid::kalman::ModelSpec;
 use sysid::modelfile::ExprAffine;
 use sysid::models::{LinearAffine, NlbenchAffine, NlbenchParams};
-use sysid::smc::{PathSmoother, SmcError};
 
 /// The affine model chosen on the command line, with its starting parameters.
 enum Chosen {
@@ -119,37 +118,7 @@ pub(super) fn fit_options(
     o: &Options,
     spec: AffineEmSpec,
 ) -> Result<CheckedAffineFitOptions, CliError> {
-    let method = AffineMethod::from_name(&o.method).ok_or_else(|| {
-        bad(
-            "--method",
-            format!(
-                "unknown method {:?} (known: {})",
-                o.method,
-                AffineMethod::NAMES.join(", ")
-            ),
-        )
-    })?;
-    let mut options = AffineFitOptions::default().with_method(method);
-    options.spec = spec;
-    options.particles = o.particles;
-    options.smoother = chosen_smoother(o)?;
-    options.iterations = o.max_iter;
-    options.starts = o.starts;
-    if o.polish == "off" {
-        options.polish_particles = 0;
-    }
-    options.extrapolate = o.extrapolate == "on";
-    options.check().map_err(|e| match e {
-        AffineEmError::InvalidOption { name, reason } => bad(
-            match name {
-                "particles" => "--particles",
-                "iterations" => "--max-iter",
-                _ => "--starts",
-            },
-            reason,
-        ),
-        other => affine_error("options")(other),
-    })
+    Ok(o.settings()?.affine_options()?.with_spec(spec))
 }
 
 /// `sysid fit nlbench` / `sysid fit affine`.
@@ -214,20 +183,22 @@ pub fn run(o: &Options, nlbench: bool) -> Result<(), CliError> {
 
 /// The progress bar of a run: EM's and PSAEM's iterations; the robust driver runs its
 /// starts in parallel and has a spinner (off a terminal, a line every 30 s).
-pub(super) fn progress_of(job: &Job) -> Option<crate::progress::Progress> {
-    let o = job.o;
-    let label = match job.options.options().method {
+pub(super) fn progress_of(
+    o: &Options,
+    options: &AffineFitOptions,
+) -> Option<crate::progress::Progress> {
+    let label = match options.method {
         AffineMethod::Robust => {
             return Some(crate::progress::Progress::spinner(
                 "robust particle EM",
                 o.json,
             ));
         }
-        AffineMethod::Em => o.smoother.as_str(),
+        AffineMethod::Em => options.smoother.name(),
         _ => "psaem",
     };
     Some(crate::progress::Progress::new(
-        o.max_iter as u64,
+        options.iterations as u64,
         label,
         o.json,
     ))
@@ -257,7 +228,7 @@ where
     let o = job.o;
     let context = o.data.data.display().to_string();
     let series = series_of(&job.file, &context)?;
-    let progress = progress_of(job);
+    let progress = progress_of(o, job.options.options());
     let began = std::time::Instant::now();
     // Ctrl-C ends EM, or the robust exploration or refinement, where it is; the result
     // so far is written, marked interrupted
@@ -304,17 +275,6 @@ where
             report_em(job, model, start, result, iterates, method, row)
         }
     }
-}
-
-/// `--smoother tanizaki|ffbsi-reject` (rejection FFBSi draws `--particles` paths).
-fn chosen_smoother(o: &Options) -> Result<PathSmoother, CliError> {
-    PathSmoother::for_em(&o.smoother, o.particles).map_err(|e| match e {
-        SmcError::InvalidOption { reason, .. } => bad("--smoother", reason),
-        other => CliError::Smc {
-            context: "--smoother".into(),
-            source: other,
-        },
-    })
 }
 
 /// Names of the columns of the parameter trace and the output file's contents.

@@ -4,6 +4,13 @@
 
 use crate::DataArgs;
 use std::path::PathBuf;
+use sysid::em::affine::AffineFitOptions;
+use sysid::modelfile::{Criterion, SimulationFitOptions};
+
+/// A library switch's default as the command line spells it.
+fn on_off(on: bool) -> &'static str {
+    if on { "on" } else { "off" }
+}
 
 /// `sysid fit`: a model class, or a model file (`--model`).
 #[derive(clap::Args, Debug)]
@@ -25,9 +32,9 @@ pub struct FitCommand {
     /// The data (`fit --model`).
     #[command(flatten)]
     pub data: Option<DataArgs>,
-    /// Maximum number of EM iterations (particle EM runs exactly this many; with
-    /// `--accelerate squarem`, a budget of E-steps, three per cycle).
-    #[arg(long, visible_alias = "iters", default_value_t = 500)]
+    /// Particle EM or gradient EM: the number of iterations (particle EM runs exactly
+    /// this many; the robust driver's refinement).
+    #[arg(long, visible_alias = "iters", default_value_t = AffineFitOptions::default().iterations)]
     pub max_iter: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     #[arg(long, default_value_t = 1)]
@@ -38,22 +45,32 @@ pub struct FitCommand {
     /// over the free parameters and the initial state by Levenberg-Marquardt with exact
     /// sensitivities, from the file's values and --starts - 1 perturbations of them;
     /// best for a model that is to simulate from the inputs alone).
-    #[arg(long, default_value = "likelihood")]
-    pub criterion: String,
+    #[arg(long, default_value_t = Criterion::default())]
+    pub criterion: Criterion,
     /// `--criterion simulation`: simulations allowed per run, in units of (number of
     /// unknowns + 1).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = SimulationFitOptions::default().patience)]
     pub patience: usize,
     /// `--criterion simulation`: the spread of the perturbed starts on the log scale
     /// (each free value times exp(spread N(0, 1)); 0.3 is about +-30 %).
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = SimulationFitOptions::default().spread)]
     pub spread: f64,
+    /// `fit --model` with the robust method: `on` (the default) finishes the estimate
+    /// by maximising a 10 000-particle log-likelihood directly (the robust particle EM
+    /// driver's polish; the direct search's finish); `off` keeps the estimate of the
+    /// exploration and refinement.
+    #[arg(long, default_value = on_off(AffineFitOptions::default().polish_particles > 0), value_parser = ["on", "off"])]
+    pub polish: String,
     /// Particle EM's settings (`fit --model`).
     #[command(flatten)]
     pub em: ParticleEmArgs,
     /// The outputs (`fit --model`).
     #[command(flatten)]
     pub output: Option<OutputArgs>,
+    /// The ids of the arguments given on the command line (not defaulted), filled
+    /// after parsing: a fit refuses a given flag its method does not read.
+    #[arg(skip)]
+    pub given: Vec<String>,
 }
 
 /// The model classes.
@@ -93,12 +110,12 @@ pub struct OutputArgs {
 #[derive(clap::Args, Debug, Clone)]
 pub struct ParticleEmArgs {
     /// Particle EM: particles M of the filter (and paths of `ffbsi-reject`).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = AffineFitOptions::default().particles)]
     pub particles: usize,
     /// Particle EM: E-step smoother, `tanizaki` (seed 000's, O(M^2) per step) or
     /// `ffbsi-reject` (O(M) expected per step when the transition density is not too
     /// peaked).
-    #[arg(long, default_value = "tanizaki")]
+    #[arg(long, default_value = AffineFitOptions::default().smoother.name())]
     pub smoother: String,
     /// Particle fits: `robust` (the default: several starts around --init explored
     /// with the noise estimated from an inflated value, the best by a 1000-particle
@@ -108,20 +125,20 @@ pub struct ParticleEmArgs {
     /// --init, seed 000's algorithm; gradient EM for a file that is not affine) or
     /// `psaem` (stochastic-approximation EM with a conditional particle
     /// filter with ancestor sampling, Lindsten 2013; 15 particles are usually enough).
-    #[arg(long, default_value = "robust")]
+    #[arg(long, default_value = AffineFitOptions::default().method.name())]
     pub method: String,
     /// Particle fits with `--method robust`: the number of starts (--init and
     /// perturbations of it, each coefficient times U[0.5, 1.5]); `--criterion
     /// simulation`: the runs (the file's values and perturbations of them, each free
     /// value times exp(--spread N(0, 1))).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = AffineFitOptions::default().starts)]
     pub starts: usize,
     /// The robust particle driver (`fit nlbench`, `fit affine`, `fit --model`): `on`
     /// (the default) lets its refinement jump along its own drift every 25 iterations
     /// (overrelaxed EM; a jump is kept only when a 1000-particle filter on common
     /// random numbers gains a nat), which reaches a slow ridge's end in hundreds of
     /// iterations instead of thousands; `off` runs plain EM iterations.
-    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    #[arg(long, default_value = on_off(AffineFitOptions::default().extrapolate), value_parser = ["on", "off"])]
     pub extrapolate: String,
 }
 
@@ -271,7 +288,7 @@ pub struct NlbenchArgs {
     pub init: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
-    #[arg(long, visible_alias = "iters", default_value_t = 500)]
+    #[arg(long, visible_alias = "iters", default_value_t = AffineFitOptions::default().iterations)]
     pub max_iter: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     #[arg(long, default_value_t = 1)]

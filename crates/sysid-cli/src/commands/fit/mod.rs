@@ -20,7 +20,7 @@ use crate::error::CliError;
 /// `sysid fit`: refuses the outputs that exist, then runs the class's command.
 pub fn run(command: FitCommand) -> Result<(), CliError> {
     let options = match command.class {
-        Some(class) => Some(Options::of_class(class)),
+        Some(class) => Some(Options::of_class(class, command.given)),
         None => Options::of_model_file(command),
     };
     let Some(o) = options else {

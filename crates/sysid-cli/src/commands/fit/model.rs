@@ -6,16 +6,15 @@
 //! FFBSi with `--particles` paths, analytic gradients). The estimate is written as a
 //! model file that every nonlinear command reads.
 
-use super::affine::{Job, fit_options, fit_run, observer_of, progress_of, report};
+use super::affine::{Job, fit_run, observer_of, progress_of, report};
 use super::options::Options;
 use super::toml_metadata::metadata_lines;
 use crate::commands::particle::series_of;
 use crate::error::CliError;
 use crate::files::{fmt, write_output};
 use sysid::em::Termination;
-use sysid::em::affine::AffineEmSpec;
 use sysid::em::gradient::{DirectFit, DirectOptions, GradientModel};
-use sysid::modelfile::{FileFit, FileFitError, FileFitReport, ModelFile};
+use sysid::modelfile::{FileFit, FileFitError, FileFitMethod, FileFitReport, ModelFile};
 
 mod simulation;
 
@@ -33,7 +32,9 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .as_deref()
         .ok_or_else(|| bad("--model", "give a model file"))?;
     let model = crate::commands::nonlinear::read(path)?;
-    let options = fit_options(o, AffineEmSpec::default())?;
+    let method = model
+        .fit_method(o.criterion, &o.settings()?)
+        .map_err(|e| file_error(o, e))?;
     if model.free_names().is_empty() {
         return Err(file_error(
             o,
@@ -46,32 +47,16 @@ pub fn run(o: &Options) -> Result<(), CliError> {
         .data
         .read_for_names(&model.spec().inputs, &model.spec().outputs)?;
     let context = o.data.data.display().to_string();
-    let job = Job {
-        o,
-        file,
-        options,
-        extra_warnings: Vec::new(),
-    };
-    let series = series_of(&job.file, &context)?;
-    match o.criterion.as_str() {
-        "likelihood" => {}
-        "simulation" => return simulation::run(o, &model, series),
-        other => {
-            return Err(bad(
-                "--criterion",
-                format!("{other:?} is not a criterion: use likelihood or simulation"),
-            ));
-        }
-    }
-    let affine = model.affine();
-    let progress = match &affine {
-        Some(_) => progress_of(&job),
-        None if o.method == "robust" => Some(crate::progress::Progress::spinner(
+    let series = series_of(&file, &context)?;
+    let progress = match &method {
+        FileFitMethod::Simulation(_) => return simulation::run(o, &model, series, &method),
+        FileFitMethod::ParticleEm(options) => progress_of(o, options.options()),
+        FileFitMethod::Direct(_) => Some(crate::progress::Progress::spinner(
             "direct maximum likelihood",
             o.json,
         )),
-        None => Some(crate::progress::Progress::new(
-            o.max_iter as u64,
+        FileFitMethod::GradientEm(options) => Some(crate::progress::Progress::new(
+            options.iterations as u64,
             "gradient EM",
             o.json,
         )),
@@ -81,23 +66,25 @@ pub fn run(o: &Options) -> Result<(), CliError> {
     crate::progress::interruptible();
     let mut observer = observer_of(&progress);
     let fit = model
-        .fit(series, &job.options, &fit_run(o), observer.as_mut())
+        .fit(series, &method, &fit_run(o), observer.as_mut())
         .map_err(|e| file_error(o, e))?;
     if let Some(p) = &progress {
         p.finish();
     }
     let seconds = began.elapsed().as_secs_f64();
-    match (&fit.report, affine) {
-        (FileFitReport::Affine(report_of), Some(affine)) => {
+    match (&fit.report, model.affine(), method) {
+        (FileFitReport::Affine(report_of), Some(affine), FileFitMethod::ParticleEm(options)) => {
             // the fit's own warnings are the robust driver's, reported with it
             let job = Job {
+                o,
+                file,
+                options,
                 extra_warnings: fit
                     .warnings
                     .iter()
                     .filter(|w| !matches!(w, sysid::modelfile::FileFitWarning::Robust(_)))
                     .map(ToString::to_string)
                     .collect(),
-                ..job
             };
             let start = affine
                 .params(&model.free_values())
@@ -111,7 +98,7 @@ pub fn run(o: &Options) -> Result<(), CliError> {
                 fit: direct,
                 simulation_start,
             },
-            _,
+            ..,
         ) => report_direct(o, &model, &fit, direct, *simulation_start),
         _ => report_gradient(o, &model, &fit),
     }
@@ -248,7 +235,13 @@ pub(super) fn file_error(o: &Options, e: FileFitError) -> CliError {
     match e {
         FileFitError::NothingFree { .. } => bad("--model", e.to_string()),
         FileFitError::NotAffine { .. } => bad("--method", e.to_string()),
-        FileFitError::InvalidOption { reason, .. } => bad("--particles", reason),
+        FileFitError::InvalidOption { name, reason } => {
+            CliError::Setting(sysid::em::SettingError::Invalid {
+                setting: name,
+                reason,
+            })
+        }
+        FileFitError::Setting(e) => CliError::Setting(e),
         FileFitError::Start(m) => bad("--model", m.reason),
         FileFitError::Affine(source) => CliError::AffineEm { context, source },
         FileFitError::Gradient(source) => CliError::GradientEm { context, source },

@@ -5,7 +5,11 @@ use super::args::{
     AffineArgs, FitClass, FitCommand, LtiArgs, NlbenchArgs, OutputArgs, ParticleEmArgs, WienerArgs,
 };
 use crate::DataArgs;
+use crate::error::CliError;
 use std::path::PathBuf;
+use sysid::em::FitSettings;
+use sysid::em::affine::AffineMethod;
+use sysid::modelfile::Criterion;
 
 /// The options of a fit, whatever its class (those of other classes at their
 /// defaults: the command line refuses them).
@@ -145,7 +149,7 @@ pub struct Options {
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
     pub seed: u64,
     /// `fit --model`: `likelihood` or `simulation`.
-    pub criterion: String,
+    pub criterion: Criterion,
     /// `--criterion simulation`: simulations per run, in units of (unknowns + 1).
     pub patience: usize,
     /// `--criterion simulation`: the perturbations' spread on the log scale.
@@ -173,6 +177,8 @@ pub struct Options {
     pub force: bool,
     /// Print `{loglik, iterations, termination, seconds}` as JSON.
     pub json: bool,
+    /// The ids of the arguments given on the command line (the others are defaults).
+    pub given: Vec<String>,
 }
 
 impl Options {
@@ -208,7 +214,7 @@ impl Options {
             method: "robust".into(),
             starts: 8,
             seed: 1,
-            criterion: "likelihood".into(),
+            criterion: Criterion::default(),
             patience: 100,
             spread: 0.3,
             estimate_noise: None,
@@ -218,7 +224,33 @@ impl Options {
             trace: output.trace,
             force: output.force,
             json: output.json,
+            given: Vec::new(),
         }
+    }
+
+    /// The particle-fit settings given on the command line (`None` for a flag left at
+    /// its default: the method that runs fills it with its own default, and refuses a
+    /// given flag it does not read).
+    pub fn settings(&self) -> Result<FitSettings, CliError> {
+        let given = |id: &str| self.given.iter().any(|g| g == id);
+        let method =
+            self.method
+                .parse::<AffineMethod>()
+                .map_err(|message| CliError::BadOption {
+                    option: "--method",
+                    message,
+                })?;
+        Ok(FitSettings {
+            method: given("method").then_some(method),
+            particles: given("particles").then_some(self.particles),
+            smoother: given("smoother").then(|| self.smoother.clone()),
+            max_iter: given("max_iter").then_some(self.max_iter),
+            starts: given("starts").then_some(self.starts),
+            polish: given("polish").then_some(self.polish != "off"),
+            extrapolate: given("extrapolate").then_some(self.extrapolate == "on"),
+            patience: given("patience").then_some(self.patience),
+            spread: given("spread").then_some(self.spread),
+        })
     }
 
     fn with_particle_em(mut self, em: ParticleEmArgs) -> Options {
@@ -240,8 +272,8 @@ impl Options {
     }
 
     /// The options of a class's command.
-    pub fn of_class(class: FitClass) -> Options {
-        match class {
+    pub fn of_class(class: FitClass, given: Vec<String>) -> Options {
+        let o = match class {
             FitClass::Lti(a) => Options::lti(*a),
             FitClass::Nlbench(a) => Options::nlbench("nlbench", *a),
             FitClass::Affine(a) => {
@@ -266,7 +298,8 @@ impl Options {
                     ..Options::new(Some("wiener"), data, output)
                 }
             }
-        }
+        };
+        Options { given, ..o }
     }
 
     fn lti(a: LtiArgs) -> Options {
@@ -299,6 +332,8 @@ impl Options {
     /// The options of `fit --model m.toml`; `None` without its data or outputs.
     pub fn of_model_file(a: FitCommand) -> Option<Options> {
         let mut o = Options::new(None, a.data?, a.output?).with_particle_em(a.em);
+        o.given = a.given;
+        o.polish = a.polish;
         o.model = a.model;
         o.max_iter = a.max_iter;
         o.seed = a.seed;

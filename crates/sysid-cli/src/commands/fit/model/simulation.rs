@@ -7,47 +7,42 @@ use crate::commands::fit::options::Options;
 use crate::commands::fit::toml_metadata::metadata_lines;
 use crate::error::CliError;
 use crate::files::{fmt, write_output};
-use sysid::modelfile::{ModelFile, SimulationFitOptions};
+use sysid::em::FitRun;
+use sysid::modelfile::{FileFitMethod, FileFitReport, ModelFile};
 use sysid::smc::Series;
 
 /// Fits, writes and reports.
-pub fn run(o: &Options, model: &ModelFile, series: Series<'_>) -> Result<(), CliError> {
+pub fn run(
+    o: &Options,
+    model: &ModelFile,
+    series: Series<'_>,
+    method: &FileFitMethod,
+) -> Result<(), CliError> {
     if o.trace.is_some() {
         return Err(bad(
             "--trace",
             "--criterion simulation has no iteration trace; leave --trace out",
         ));
     }
-    let options = SimulationFitOptions {
-        starts: o.starts,
-        patience: o.patience,
-        spread: o.spread,
-        seed: o.seed,
-        ..SimulationFitOptions::default()
-    };
     crate::files::refuse_existing(std::iter::once(o.out.as_path()), o.force)?;
     crate::progress::interruptible();
     let began = std::time::Instant::now();
-    let stop = crate::progress::interrupted;
-    let fit = model
-        .fit_simulation_error(series, &options, &stop)
-        .map_err(|e| match e {
-            sysid::modelfile::FileFitError::InvalidOption { name, reason } => bad(
-                match name {
-                    "starts" => "--starts",
-                    "spread" => "--spread",
-                    _ => "--patience",
-                },
-                reason,
-            ),
-            other => file_error(o, other),
-        })?;
+    let run = FitRun::new(o.seed).stopped_by(&crate::progress::interrupted);
+    let fitted = model
+        .fit(series, method, &run, &mut ())
+        .map_err(|e| file_error(o, e))?;
+    let (FileFitReport::Simulation(fit), FileFitMethod::Simulation(options)) =
+        (&fitted.report, method)
+    else {
+        unreachable!("the simulation-error method gives its report")
+    };
+    let asked = options.starts;
     let seconds = began.elapsed().as_secs_f64();
     let names = model.free_names();
     let outputs = &model.spec().outputs;
     let warnings: Vec<String> = fit.warnings.iter().map(ToString::to_string).collect();
     let summary = serde_json::json!({
-        "method": "simulation-error", "criterion": "simulation", "starts": o.starts,
+        "method": "simulation-error", "criterion": "simulation", "starts": asked,
         "seed": o.seed, "data": o.data.data.display().to_string(),
         "rms": fit.rms.first(), "fit_percent": fit.fit_percent.first(),
         "interrupted": fit.interrupted,

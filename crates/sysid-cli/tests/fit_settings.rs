@@ -68,6 +68,84 @@ fn the_help_shows_the_library_defaults() {
     }
 }
 
+#[test]
+fn fit_lti_help_shows_the_library_defaults() {
+    use sysid::em::linear::{LinearFitOptions, Selection, Start};
+    let d = LinearFitOptions::default();
+    let Start::N4sid { weighting, .. } = d.start else {
+        panic!("the default start is N4SID")
+    };
+    let text = help(&["fit", "lti", "--help"]);
+    let expected = [
+        ("--weighting", weighting.name().to_string()),
+        ("--initial", d.initial.name().to_string()),
+        ("--accelerate", d.acceleration.name().to_string()),
+        ("--polish", d.polish.name().to_string()),
+        ("--std-errors", d.std_errors.name().to_string()),
+        (
+            "--detrend",
+            d.detrend.map_or("none", |k| k.name()).to_string(),
+        ),
+        ("--select", Selection::default().name().to_string()),
+        ("--max-iter", d.max_iterations.to_string()),
+        ("--tol-nats", d.tol_nats.to_string()),
+        ("--min-variance", d.min_variance.to_string()),
+        ("--min-output-noise", d.min_output_noise.to_string()),
+    ];
+    for (flag, value) in expected {
+        assert_eq!(help_default(&text, flag), Some(value), "fit lti {flag}");
+    }
+    // a value outside the library's names is refused by the parser, listing them
+    let out = sysid(&[
+        "fit", "lti", "--data", "x.csv", "--select", "bicc", "--out", "x.json",
+    ]);
+    assert_one_line_error(&out, &["bicc", "bic, aic, validation"]);
+}
+
+#[test]
+fn fit_lti_refuses_the_start_s_settings_with_a_start_model_and_select_without_a_range() {
+    let dir = scratch_dir();
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/ar1.csv");
+    let start = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/ar1_start.json");
+    let out = dir.join("fit.json");
+    for (extra, setting, what) in [
+        (
+            &["--init", s(&start), "--weighting", "cva"][..],
+            "--weighting",
+            "EM from the given start model",
+        ),
+        (
+            &["--init", s(&start), "--stable"][..],
+            "--stable",
+            "EM from the given start model",
+        ),
+        (
+            &["--order", "1", "--select", "aic"][..],
+            "--select",
+            "a fit of one order",
+        ),
+    ] {
+        let mut args = vec!["fit", "lti", "--data", s(&data), "--out", s(&out)];
+        args.extend_from_slice(extra);
+        assert_one_line_error(
+            &sysid(&args),
+            &[&format!("{setting} does not apply to {what}")],
+        );
+        assert!(!out.exists());
+    }
+    // at their defaults they are not given, and the fit runs
+    assert_ok(&sysid(&[
+        "fit",
+        "lti",
+        "--data",
+        s(&data),
+        "--init",
+        s(&start),
+        "--out",
+        s(&out),
+    ]));
+}
+
 /// A record of the guide's oscillator, and the file itself, in `dir`.
 fn oscillator(dir: &Path) -> (PathBuf, PathBuf) {
     let model = dir.join("osc.toml");

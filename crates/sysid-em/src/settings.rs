@@ -150,6 +150,15 @@ pub enum SettingError {
 }
 
 impl SettingError {
+    /// `setting` given where `what` runs, which does not read it.
+    pub fn not_applicable(setting: &'static str, what: &str) -> SettingError {
+        SettingError::NotApplicable {
+            setting,
+            method: what.to_string(),
+            reads: &[],
+        }
+    }
+
     /// The setting at fault.
     pub fn setting(&self) -> &'static str {
         match self {
@@ -170,12 +179,11 @@ impl SettingError {
             } => {
                 let read: Vec<String> = reads.iter().map(|r| name(r)).collect();
                 let read = match read.is_empty() {
-                    true => "no other setting".to_string(),
-                    false => read.join(", "),
+                    true => String::new(),
+                    false => format!(" (it reads {})", read.join(", ")),
                 };
                 format!(
-                    "{} does not apply to {method}, which runs here (it reads {read}); \
-                     leave it out",
+                    "{} does not apply to {method}, which runs here{read}; leave it out",
                     name(setting)
                 )
             }

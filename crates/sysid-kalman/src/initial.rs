@@ -25,6 +25,19 @@ pub enum InitialState {
 }
 
 impl InitialState {
+    /// The names the command line and Python use: `model` (the model's own, a model
+    /// file's `given`), `stationary`, `diffuse`.
+    pub const NAMES: [&'static str; 3] = ["model", "stationary", "diffuse"];
+
+    /// Its name in [`InitialState::NAMES`].
+    pub fn name(self) -> &'static str {
+        match self {
+            InitialState::Given => Self::NAMES[0],
+            InitialState::Stationary => Self::NAMES[1],
+            InitialState::Diffuse => Self::NAMES[2],
+        }
+    }
+
     /// `model` with this initial state.
     ///
     /// # Errors
@@ -198,4 +211,28 @@ pub fn stationary_covariance(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatr
     }
     sysid_linalg::symmetrize(&mut p);
     Ok(p)
+}
+
+impl std::fmt::Display for InitialState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for InitialState {
+    type Err = String;
+
+    /// An initial state by its name (`given`, a model file's spelling, for `model`);
+    /// the error lists the names.
+    fn from_str(name: &str) -> std::result::Result<Self, String> {
+        match name {
+            "model" | "given" => Ok(InitialState::Given),
+            "stationary" => Ok(InitialState::Stationary),
+            "diffuse" => Ok(InitialState::Diffuse),
+            other => Err(format!(
+                "unknown initial state {other:?} (known: {})",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
 }

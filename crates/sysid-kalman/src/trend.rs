@@ -33,6 +33,41 @@ pub enum TrendKind {
     Linear,
 }
 
+impl TrendKind {
+    /// The names of a detrending choice: `none`, then each kind's.
+    pub const NAMES: [&'static str; 3] = ["none", "mean", "linear"];
+
+    /// `mean` or `linear`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrendKind::Mean => Self::NAMES[1],
+            TrendKind::Linear => Self::NAMES[2],
+        }
+    }
+
+    /// A detrending choice by name: `none` (nothing removed), `mean` or `linear`.
+    ///
+    /// # Errors
+    /// The message for an unknown name, listing the names.
+    pub fn choice(name: &str) -> Result<Option<TrendKind>, String> {
+        match name {
+            "none" => Ok(None),
+            "mean" => Ok(Some(TrendKind::Mean)),
+            "linear" => Ok(Some(TrendKind::Linear)),
+            other => Err(format!(
+                "unknown detrending {other:?} (known: {})",
+                Self::NAMES.join(", ")
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for TrendKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Why a trend cannot be estimated, read or folded.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]

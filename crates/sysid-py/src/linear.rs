@@ -7,9 +7,10 @@ use crate::run::{Progress, supervise};
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use sysid::em::SettingError;
 use sysid::em::linear::{
-    Acceleration, Fix, FixValue, LinearFit, LinearFitError, LinearFitOptions, Matrix, OrderChoice,
-    Selection, Signals, Start, Switch,
+    Fix, FixValue, LinearFit, LinearFitError, LinearFitOptions, Matrix, OrderChoice, Selection,
+    Signals, Start,
 };
 use sysid::kalman::{
     InitialState, KalmanWorkspace, LinearGaussianModel, Metadata, ModelSpec, Record, Trend,
@@ -24,6 +25,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(loglik, m)?)?;
     m.add_function(wrap_pyfunction!(n4sid_fit, m)?)?;
     m.add_function(wrap_pyfunction!(fit_lti, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_lti_defaults, m)?)?;
     crate::checks::register(m)
 }
 
@@ -93,17 +95,9 @@ pub(crate) fn prepare(
     })
 }
 
-/// `initial=`: `model`, `stationary` or `diffuse`.
+/// `initial=`: `model`, `stationary` or `diffuse` (the library's names).
 fn initial_state(text: &str) -> Result<InitialState, Failure> {
-    match text {
-        "model" => Ok(InitialState::Given),
-        "stationary" => Ok(InitialState::Stationary),
-        "diffuse" => Ok(InitialState::Diffuse),
-        other => Err(Failure::option(
-            "initial",
-            format!("unknown initial state {other:?} (known: model, stationary, diffuse)"),
-        )),
-    }
+    text.parse().map_err(|m| Failure::option("initial", m))
 }
 
 /// `sysid loglik`: the exact log-likelihood of a stored model on a record.
@@ -149,7 +143,7 @@ fn n4sid_fit<'py>(
     detrend: Option<&str>,
     time: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let choice = weighting_of(weighting)?;
+    let choice: WeightingChoice = parsed("weighting", weighting)?;
     let options = N4sidOptions {
         order: order.map_or(Order::Auto, Order::Fixed),
         block_rows,
@@ -241,38 +235,12 @@ fn n4sid_fit<'py>(
 
 /// `detrend=`: `None`/`"none"`, `"mean"` or `"linear"`.
 fn trend_kind(text: Option<&str>) -> Result<Option<TrendKind>, Failure> {
-    match text {
-        None | Some("none") => Ok(None),
-        Some("mean") => Ok(Some(TrendKind::Mean)),
-        Some("linear") => Ok(Some(TrendKind::Linear)),
-        Some(other) => Err(Failure::option(
-            "detrend",
-            format!("unknown detrending {other:?} (known: none, mean, linear)"),
-        )),
-    }
+    TrendKind::choice(text.unwrap_or("none")).map_err(|m| Failure::option("detrend", m))
 }
 
-/// A subspace weighting: `auto` or a weighting's name.
-fn weighting_of(weighting: &str) -> Result<WeightingChoice, Failure> {
-    WeightingChoice::parse(weighting).ok_or_else(|| {
-        Failure::option(
-            "weighting",
-            format!("unknown weighting {weighting:?} (known: auto, n4sid, moesp, cva)"),
-        )
-    })
-}
-
-/// A switch option: `"auto"`, `"on"`/`True`, `"off"`/`False`.
-fn switch(name: &str, value: &str) -> Result<Switch, Failure> {
-    match value {
-        "auto" => Ok(Switch::Auto),
-        "on" => Ok(Switch::On),
-        "off" => Ok(Switch::Off),
-        other => Err(Failure::option(
-            name,
-            format!("{other:?} is not one of auto, on, off"),
-        )),
-    }
+/// A keyword's value in the library's spelling (`FromStr` of its option type).
+fn parsed<T: std::str::FromStr<Err = String>>(keyword: &str, text: &str) -> Result<T, Failure> {
+    text.parse().map_err(|m| Failure::option(keyword, m))
 }
 
 /// One `fix=` entry, as the Python half normalises it: a matrix name and no value
@@ -285,17 +253,7 @@ enum FixGiven {
 }
 
 fn fix_of(given: FixGiven) -> Result<Fix, Failure> {
-    let matrix = |name: &str| {
-        Matrix::from_name(name).ok_or_else(|| {
-            Failure::option(
-                "fix",
-                format!(
-                    "unknown matrix {name:?} (known: {})",
-                    Matrix::ALL.map(Matrix::name).join(", ")
-                ),
-            )
-        })
-    };
+    let matrix = |name: &str| parsed::<Matrix>("fix", name);
     Ok(match given {
         FixGiven::Start(name) => Fix::at_start(matrix(&name)?),
         FixGiven::Number(name, v) => Fix::at(matrix(&name)?, FixValue::Scalar(v)),
@@ -316,18 +274,7 @@ fn fit_options(o: &Bound<'_, PyDict>) -> PyResult<LinearFitOptions> {
         }
     }
     let mut options = LinearFitOptions::default();
-    let select = match get::<String>(o, "select")?.as_str() {
-        "bic" => Selection::Bic,
-        "aic" => Selection::Aic,
-        "validation" => Selection::Validation,
-        other => {
-            return Err(Failure::option(
-                "select",
-                format!("unknown criterion {other:?} (known: bic, aic, validation)"),
-            )
-            .into());
-        }
-    };
+    let select = parsed::<Selection>("select", &get::<String>(o, "select")?)?;
     options.order = match (
         get::<Option<usize>>(o, "order")?,
         get::<Option<(usize, usize)>>(o, "order_range")?,
@@ -339,23 +286,35 @@ fn fit_options(o: &Bound<'_, PyDict>) -> PyResult<LinearFitOptions> {
     options.start = match get::<Option<String>>(o, "init")? {
         None => Start::N4sid {
             stable: get(o, "stable")?,
-            weighting: weighting_of(&get::<String>(o, "weighting")?)?,
+            weighting: parsed("weighting", &get::<String>(o, "weighting")?)?,
         },
-        Some(text) => Start::of_file(&spec_of(&text)?).map_err(Failure::sysid)?,
+        Some(text) => {
+            // the subspace start's settings do not apply to a start model (a value
+            // other than the default is refused; the default changes nothing)
+            let weighting: WeightingChoice = parsed("weighting", &get::<String>(o, "weighting")?)?;
+            for (setting, set) in [
+                ("weighting", weighting != WeightingChoice::default()),
+                ("stable", get::<bool>(o, "stable")?),
+            ] {
+                if set {
+                    let e = SettingError::not_applicable(setting, LinearFitOptions::MODEL_START);
+                    return Err(Failure::setting(&e).into());
+                }
+            }
+            Start::of_file(&spec_of(&text)?).map_err(Failure::sysid)?
+        }
     };
+    if select != Selection::default() && !matches!(options.order, OrderChoice::Range { .. }) {
+        let e = SettingError::not_applicable("select", LinearFitOptions::ONE_ORDER);
+        return Err(Failure::setting(&e).into());
+    }
     options.fixes = get::<Vec<FixGiven>>(o, "fix")?
         .into_iter()
         .map(fix_of)
         .collect::<Result<_, _>>()?;
     options.diagonal = get::<Vec<String>>(o, "diag")?
         .iter()
-        .map(|name| match Matrix::from_name(name) {
-            Some(m @ (Matrix::Q | Matrix::R)) => Ok(m),
-            _ => Err(Failure::option(
-                "diag",
-                format!("{name:?}: only Q and R can be diagonal"),
-            )),
-        })
+        .map(|name| Matrix::diagonal_from_name(name).map_err(|m| Failure::option("diag", m)))
         .collect::<Result<_, _>>()?;
     options.full_r = get(o, "full_r")?;
     options.min_variance = get(o, "min_variance")?;
@@ -363,25 +322,45 @@ fn fit_options(o: &Bound<'_, PyDict>) -> PyResult<LinearFitOptions> {
     options.offset = get(o, "offset")?;
     options.estimate_initial = get(o, "estimate_initial")?;
     options.initial = initial_state(&get::<String>(o, "initial")?)?;
-    options.acceleration = match get::<String>(o, "accelerate")?.as_str() {
-        "squarem" => Acceleration::Squarem,
-        "none" => Acceleration::None,
-        other => {
-            return Err(Failure::option(
-                "accelerate",
-                format!("unknown acceleration {other:?} (known: squarem, none)"),
-            )
-            .into());
-        }
-    };
-    options.polish = switch("polish", &get::<String>(o, "polish")?)?;
-    options.std_errors = switch("std_errors", &get::<String>(o, "std_errors")?)?;
+    options.acceleration = parsed("accelerate", &get::<String>(o, "accelerate")?)?;
+    options.polish = parsed("polish", &get::<String>(o, "polish")?)?;
+    options.std_errors = parsed("std_errors", &get::<String>(o, "std_errors")?)?;
     options.detrend = trend_kind(get::<Option<String>>(o, "detrend")?.as_deref())?;
     options.split = get(o, "split")?;
     options.max_iterations = get(o, "max_iter")?;
     options.tol = get(o, "tol")?;
     options.tol_nats = get(o, "tol_nats")?;
     Ok(options)
+}
+
+/// The library's default of each keyword of `fit_lti` ([`LinearFitOptions::default`]),
+/// in the keywords' spelling: the values its signature must show.
+#[pyfunction]
+fn fit_lti_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = LinearFitOptions::default();
+    let out = PyDict::new(py);
+    let Start::N4sid { stable, weighting } = d.start else {
+        return Err(Failure::sysid("the default start is N4SID").into());
+    };
+    out.set_item("init", "n4sid")?;
+    out.set_item("stable", stable)?;
+    out.set_item("weighting", weighting.name())?;
+    out.set_item("full_r", d.full_r)?;
+    out.set_item("min_variance", d.min_variance)?;
+    out.set_item("min_output_noise", d.min_output_noise)?;
+    out.set_item("offset", d.offset)?;
+    out.set_item("estimate_initial", d.estimate_initial)?;
+    out.set_item("initial", d.initial.name())?;
+    out.set_item("accelerate", d.acceleration.name())?;
+    out.set_item("polish", d.polish.name())?;
+    out.set_item("std_errors", d.std_errors.name())?;
+    out.set_item("detrend", d.detrend.map(TrendKind::name))?;
+    out.set_item("split", d.split)?;
+    out.set_item("select", Selection::default().name())?;
+    out.set_item("max_iter", d.max_iterations)?;
+    out.set_item("tol", d.tol)?;
+    out.set_item("tol_nats", d.tol_nats)?;
+    Ok(out)
 }
 
 /// A library error of `fit_lti` as the Python exception, named by the keyword.

@@ -77,3 +77,30 @@ def test_the_affine_methods_refuse_alike(oscillator_record):
     with pytest.raises(sysid.OptionError,
                        match="max_iter does not apply to the simulation-error fit"):
         sysid.fit(OSCILLATOR, data, criterion="simulation", max_iter=3)
+
+
+def test_fit_lti_signature_shows_the_library_defaults():
+    from sysid import _sysid
+    library = dict(_sysid.fit_lti_defaults())
+    signature = inspect.signature(sysid.fit_lti).parameters
+    for name, value in library.items():
+        assert signature[name].default == value, name
+    shown = help_defaults("fit", "lti")
+    for name in ["weighting", "initial", "accelerate", "polish", "std_errors", "select",
+                 "max_iter", "tol_nats", "min_variance", "min_output_noise"]:
+        value = library[name]
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            assert float(shown[name]) == value, name
+        else:
+            assert shown[name] == value, name
+    assert shown["detrend"] == "none" and library["detrend"] is None
+
+
+def test_fit_lti_refuses_the_start_s_settings_with_a_start_model():
+    from conftest import DATA
+    y = pd.read_csv(DATA / "ar1.csv")
+    start = DATA / "ar1_start.json"
+    with pytest.raises(sysid.OptionError, match="weighting does not apply to EM from the given start"):
+        sysid.fit_lti(y, init=start, weighting="cva")
+    with pytest.raises(sysid.OptionError, match="select does not apply to a fit of one order"):
+        sysid.fit_lti(y, order=1, select="aic")

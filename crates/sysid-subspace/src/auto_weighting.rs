@@ -26,12 +26,43 @@ pub enum WeightingChoice {
 }
 
 impl WeightingChoice {
+    /// The names: `auto`, then each weighting's.
+    pub const NAMES: [&'static str; 4] = ["auto", "moesp", "n4sid", "cva"];
+
     /// `auto`, or a weighting's name (`moesp`, `n4sid`, `cva`).
     pub fn parse(name: &str) -> Option<WeightingChoice> {
         if name.eq_ignore_ascii_case("auto") {
             return Some(WeightingChoice::Auto);
         }
         Weighting::parse(name).map(WeightingChoice::Fixed)
+    }
+
+    /// Its name in [`WeightingChoice::NAMES`].
+    pub fn name(self) -> &'static str {
+        match self {
+            WeightingChoice::Auto => Self::NAMES[0],
+            WeightingChoice::Fixed(w) => w.name(),
+        }
+    }
+}
+
+impl std::fmt::Display for WeightingChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for WeightingChoice {
+    type Err = String;
+
+    /// A choice by name, ignoring case; the error lists the names.
+    fn from_str(name: &str) -> Result<Self, String> {
+        WeightingChoice::parse(name).ok_or_else(|| {
+            format!(
+                "unknown weighting {name:?} (known: {})",
+                Self::NAMES.join(", ")
+            )
+        })
     }
 }
 

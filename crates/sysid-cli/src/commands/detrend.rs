@@ -13,15 +13,10 @@ use sysid::kalman::{LinearGaussianModel, TrendError, TrendKind};
 
 /// The `--detrend` option: `none`, `mean` or `linear`.
 pub fn parse(text: &str) -> Result<Option<TrendKind>, CliError> {
-    match text {
-        "none" => Ok(None),
-        "mean" => Ok(Some(TrendKind::Mean)),
-        "linear" => Ok(Some(TrendKind::Linear)),
-        other => Err(CliError::BadOption {
-            option: "--detrend",
-            message: format!("unknown detrending {other:?} (known: none, mean, linear)"),
-        }),
-    }
+    TrendKind::choice(text).map_err(|message| CliError::BadOption {
+        option: "--detrend",
+        message,
+    })
 }
 
 /// A detrending error as the option's.

@@ -251,16 +251,10 @@ pub fn model_and_data(
 /// The `--initial` option: `model` (the model file's initial state), `stationary` or
 /// `diffuse`.
 pub fn parse_initial(text: &str) -> Result<sysid::kalman::InitialState, CliError> {
-    use sysid::kalman::InitialState;
-    match text {
-        "model" => Ok(InitialState::Given),
-        "stationary" => Ok(InitialState::Stationary),
-        "diffuse" => Ok(InitialState::Diffuse),
-        other => Err(CliError::BadOption {
-            option: "--initial",
-            message: format!("unknown initial state {other:?} (known: model, stationary, diffuse)"),
-        }),
-    }
+    text.parse().map_err(|message| CliError::BadOption {
+        option: "--initial",
+        message,
+    })
 }
 
 impl crate::ModelOnData {

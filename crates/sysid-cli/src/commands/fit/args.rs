@@ -5,7 +5,10 @@
 use crate::DataArgs;
 use std::path::PathBuf;
 use sysid::em::affine::AffineFitOptions;
+use sysid::em::linear::{Acceleration, LinearFitOptions, Selection, Switch};
+use sysid::kalman::{InitialState, TrendKind};
 use sysid::modelfile::{Criterion, SimulationFitOptions};
+use sysid::subspace::WeightingChoice;
 
 /// A library switch's default as the command line spells it.
 fn on_off(on: bool) -> &'static str {
@@ -170,14 +173,14 @@ pub struct LtiArgs {
     /// Linear EM: bound the free noise variances below (`Q, R >= V I`, in the data's
     /// units; 0 = plain maximum likelihood). Use it when the likelihood climbs towards
     /// a singular `Q` or `R`, where EM is no longer numerically monotone.
-    #[arg(long, value_name = "V", default_value_t = 0.0)]
+    #[arg(long, value_name = "V", default_value_t = LinearFitOptions::default().min_variance)]
     pub min_variance: f64,
     /// Linear EM: bound the output noise below relative to each output's sample
     /// variance, `R >= REL diag(var y)`, e.g. 1e-4 for a noise standard deviation of
     /// at least 1 % of each output's. Use it when an output's noise variance heads to
     /// zero (the likelihood then grows without bound). 0 (the default) = plain maximum
     /// likelihood.
-    #[arg(long, value_name = "REL", default_value_t = 0.0)]
+    #[arg(long, value_name = "REL", default_value_t = LinearFitOptions::default().min_output_noise)]
     pub min_output_noise: f64,
     /// Linear EM: estimate R as a full covariance. By default R is diagonal when there
     /// are several outputs (independent sensor noise, MARSS's default): with a full R
@@ -195,7 +198,7 @@ pub struct LtiArgs {
     /// `cva`), or `auto`: EM runs from each of the three and the best, by the written
     /// model's likelihood, is finished (a black-box likelihood has several local maxima,
     /// and the weightings often start in different ones).
-    #[arg(long, default_value = "auto", value_parser = ["auto", "moesp", "n4sid", "cva"])]
+    #[arg(long, default_value = WeightingChoice::default().name(), value_parser = WeightingChoice::NAMES)]
     pub weighting: String,
     /// Linear EM: also estimate the output offset h (by default h is held at the
     /// start's value: for `--init n4sid`, the record's mean output less the
@@ -216,12 +219,12 @@ pub struct LtiArgs {
     /// likelihood, as statsmodels does for unit-root models). Whatever the choice, the
     /// model written describes a new record's initial state as `stationary` when its A
     /// is stable and `diffuse` otherwise (unless mu or P1 were estimated or fixed).
-    #[arg(long, default_value = "model")]
+    #[arg(long, default_value = LinearFitOptions::default().initial.name(), value_parser = InitialState::NAMES)]
     pub initial: String,
     /// Linear EM: `squarem` (the default) accelerates EM by squared extrapolation
     /// (Varadhan and Roland 2008; monotone like EM, three E-steps per cycle, often tens
     /// of times fewer E-steps to the optimum); `none` runs plain EM.
-    #[arg(long, default_value = "squarem", value_parser = ["squarem", "none"])]
+    #[arg(long, default_value = LinearFitOptions::default().acceleration.name(), value_parser = Acceleration::NAMES)]
     pub accelerate: String,
     /// After EM, maximise the likelihood directly. Linear EM: the exact log-likelihood
     /// of the model as written (its initial state included) by damped Fisher scoring
@@ -230,14 +233,14 @@ pub struct LtiArgs {
     /// 10 000-particle log-likelihood on common random numbers by Nelder-Mead from
     /// its estimate, which undoes the small-particle E-step's bias of the noise
     /// variances (`auto` and `on`), or not (`off`).
-    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
+    #[arg(long, default_value = LinearFitOptions::default().polish.name(), value_parser = Switch::NAMES)]
     pub polish: String,
     /// Linear EM: standard errors of the free parameters from the observed information
     /// (the negative Hessian of the exact log-likelihood in the model's entries, by
     /// central differences; a covariance by its upper triangle), with 95 % confidence
     /// intervals: `auto` (the default) for at most 20 free parameters, `on`, `off`.
     /// Black-box models (free A and C) are not identifiable and get none.
-    #[arg(long, default_value = "auto", value_parser = ["auto", "on", "off"])]
+    #[arg(long, default_value = LinearFitOptions::default().std_errors.name(), value_parser = Switch::NAMES)]
     pub std_errors: String,
     /// Linear EM: `mean` removes each signal's mean before the fit and folds the means
     /// into the written model's offset h (and mu), so that it describes, predicts and
@@ -247,7 +250,7 @@ pub struct LtiArgs {
     /// remove them from a record at its times and return outputs in the original units
     /// (states are those of the detrended signals); `none` (the default) fits the
     /// signals as they are.
-    #[arg(long, default_value = "none")]
+    #[arg(long, default_value = LinearFitOptions::default().detrend.map_or(TrendKind::NAMES[0], TrendKind::name), value_parser = TrendKind::NAMES)]
     pub detrend: String,
     /// Linear EM: fit on the first FRACTION of the rows (after --range) and report the
     /// fitted model's simulation and one-step prediction fits on the rest (as `sysid
@@ -257,16 +260,16 @@ pub struct LtiArgs {
     /// Linear EM with `--order FROM..TO`: the criterion that chooses the order written,
     /// `bic` (the default), `aic`, or `validation` (the best simulation fit on the rows
     /// held out by --split).
-    #[arg(long, default_value = "bic", value_parser = ["bic", "aic", "validation"])]
+    #[arg(long, default_value = Selection::default().name(), value_parser = Selection::NAMES)]
     pub select: String,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
-    #[arg(long, visible_alias = "iters", default_value_t = 500)]
+    #[arg(long, visible_alias = "iters", default_value_t = LinearFitOptions::default().max_iterations)]
     pub max_iter: usize,
     /// Linear EM: stop when the estimated distance to the maximum of the
     /// log-likelihood (Aitken's extrapolation of the last three values) is below this
     /// many nats. A run that ends at --max-iter instead says so, with the estimate.
-    #[arg(long, value_name = "NATS", default_value_t = 1e-4)]
+    #[arg(long, value_name = "NATS", default_value_t = LinearFitOptions::default().tol_nats)]
     pub tol_nats: f64,
     /// Stop when the relative log-likelihood change of an iteration is below this
     /// (default: 1e-6, except for linear EM, which uses --tol-nats unless this is

@@ -4,21 +4,18 @@
 use crate::error::CliError;
 use sysid::em::linear::{Fix, FixValue, Matrix};
 
-/// The names a user may give, as written in the model file.
-fn known() -> String {
-    Matrix::ALL.map(Matrix::name).join(", ")
-}
-
 /// Parses `NAME` or `NAME=VALUE`; VALUE is a number or JSON (`[[1, 0], [0, 1]]`, `[1, 2]`).
 pub fn parse_fix(arg: &str) -> Result<Fix, CliError> {
     let (name, value) = match arg.split_once('=') {
         Some((n, v)) => (n.trim(), Some(v.trim())),
         None => (arg.trim(), None),
     };
-    let matrix = Matrix::from_name(name).ok_or_else(|| CliError::BadOption {
-        option: "--fix",
-        message: format!("unknown matrix {name:?} (known: {})", known()),
-    })?;
+    let matrix = name
+        .parse::<Matrix>()
+        .map_err(|message| CliError::BadOption {
+            option: "--fix",
+            message,
+        })?;
     let Some(v) = value else {
         return Ok(Fix::at_start(matrix));
     };
@@ -39,11 +36,8 @@ pub fn parse_fix(arg: &str) -> Result<Fix, CliError> {
 
 /// Parses a `--diag` name: `Q` or `R`.
 pub fn parse_diagonal(name: &str) -> Result<Matrix, CliError> {
-    match Matrix::from_name(name.trim()) {
-        Some(m @ (Matrix::Q | Matrix::R)) => Ok(m),
-        _ => Err(CliError::BadOption {
-            option: "--diag",
-            message: format!("{name:?}: only Q and R can be diagonal"),
-        }),
-    }
+    Matrix::diagonal_from_name(name).map_err(|message| CliError::BadOption {
+        option: "--diag",
+        message,
+    })
 }

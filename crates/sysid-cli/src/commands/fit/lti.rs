@@ -11,31 +11,24 @@ use sysid::em::linear::{
     OrderChoice, OrderTable, Selection, Signals, Start, Switch, Uncertainty,
 };
 
-/// The flag of a library option (named by its field), for messages.
-fn flag(option: &str) -> &'static str {
-    match option {
-        "start" => "--init",
-        "order" => "--order",
-        "fixes" => "--fix",
-        "diagonal" => "--diag",
-        "min_variance" => "--min-variance",
-        "min_output_noise" => "--min-output-noise",
-        "initial" => "--initial",
-        "estimate_initial" => "--estimate-initial",
-        "split" => "--split",
-        "select" => "--select",
-        "max_iterations/tol" => "--max-iter/--tol",
-        "data" | "time" | "names" => "--data",
-        _ => "fit",
-    }
-}
-
 /// A library error as the command line's.
 fn cli_error(e: LinearFitError) -> CliError {
     match e {
-        LinearFitError::InvalidOption { option, message } => CliError::BadOption {
-            option: flag(option),
-            message,
+        // the library names its settings as the command line's flags (`max_iter` is
+        // `--max-iter`), but for the start (`--init`) and the data's own checks
+        LinearFitError::InvalidOption { option, message } => match option {
+            "start" => CliError::BadOption {
+                option: "--init",
+                message,
+            },
+            "data" | "time" | "names" => CliError::BadOption {
+                option: "--data",
+                message,
+            },
+            setting => CliError::Setting(sysid::em::SettingError::Invalid {
+                setting,
+                reason: message,
+            }),
         },
         LinearFitError::Kalman { context, source } => CliError::Kalman {
             context: match context {
@@ -66,11 +59,7 @@ fn cli_error(e: LinearFitError) -> CliError {
 
 /// `--order`: a number, `FROM..TO`, or (with a start file) nothing or `auto`.
 fn order_choice(o: &Options, n4sid: bool) -> Result<OrderChoice, CliError> {
-    let select = match o.select.as_str() {
-        "aic" => Selection::Aic,
-        "validation" => Selection::Validation,
-        _ => Selection::Bic,
-    };
+    let select = parsed::<Selection>("--select", &o.select)?;
     let Some(text) = o.order.as_deref() else {
         return Ok(OrderChoice::OfStart);
     };
@@ -94,12 +83,15 @@ fn order_choice(o: &Options, n4sid: bool) -> Result<OrderChoice, CliError> {
     }
 }
 
-fn switch(text: &str) -> Switch {
-    match text {
-        "on" => Switch::On,
-        "off" => Switch::Off,
-        _ => Switch::Auto,
-    }
+/// A flag's value in the library's spelling (`FromStr` of its option type).
+fn parsed<T: std::str::FromStr<Err = String>>(
+    flag: &'static str,
+    text: &str,
+) -> Result<T, CliError> {
+    text.parse().map_err(|message| CliError::BadOption {
+        option: flag,
+        message,
+    })
 }
 
 /// The library's options from the command line's (`file` for the start's columns).
@@ -126,29 +118,31 @@ fn library_options(
     options.offset = o.offset;
     options.estimate_initial = o.estimate_initial;
     options.initial = crate::commands::parse_initial(&o.initial)?;
-    options.acceleration = match o.accelerate.as_str() {
-        "none" => Acceleration::None,
-        _ => Acceleration::Squarem,
-    };
-    options.polish = switch(&o.polish);
-    options.std_errors = switch(&o.std_errors);
+    options.acceleration = parsed::<Acceleration>("--accelerate", &o.accelerate)?;
+    options.polish = parsed::<Switch>("--polish", &o.polish)?;
+    options.std_errors = parsed::<Switch>("--std-errors", &o.std_errors)?;
     options.detrend = crate::commands::detrend::parse(&o.detrend)?;
     options.split = o.split;
     options.max_iterations = o.max_iter;
     options.tol = o.tol;
     options.tol_nats = o.tol_nats;
+    let given = |id: &str| o.given.iter().any(|g| g == id);
+    if !n4sid && let Some(setting) = ["weighting", "stable"].into_iter().find(|s| given(s)) {
+        return Err(sysid::em::SettingError::not_applicable(
+            setting,
+            LinearFitOptions::MODEL_START,
+        )
+        .into());
+    }
+    if given("select") && !matches!(options.order, OrderChoice::Range { .. }) {
+        return Err(
+            sysid::em::SettingError::not_applicable("select", LinearFitOptions::ONE_ORDER).into(),
+        );
+    }
     options.start = if n4sid {
         Start::N4sid {
             stable: o.stable,
-            weighting: sysid::subspace::WeightingChoice::parse(&o.weighting).ok_or_else(|| {
-                CliError::BadOption {
-                    option: "--weighting",
-                    message: format!(
-                        "unknown weighting {:?} (known: auto, moesp, n4sid, cva)",
-                        o.weighting
-                    ),
-                }
-            })?,
+            weighting: parsed("--weighting", &o.weighting)?,
         }
     } else {
         let stored = read_model_file(Path::new(&o.init))?;

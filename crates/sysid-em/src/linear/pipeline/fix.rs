@@ -68,6 +68,22 @@ impl Matrix {
             .find(|m| m.name().eq_ignore_ascii_case(name))
     }
 
+    /// A covariance that may be estimated as diagonal (`Q` or `R`), by name.
+    ///
+    /// # Errors
+    /// The message for any other name.
+    pub fn diagonal_from_name(name: &str) -> Result<Matrix, String> {
+        match Matrix::from_name(name.trim()) {
+            Some(m @ (Matrix::Q | Matrix::R)) => Ok(m),
+            _ => Err(Matrix::not_diagonal(name)),
+        }
+    }
+
+    /// Why `name` cannot be diagonal.
+    pub(crate) fn not_diagonal(name: &str) -> String {
+        format!("{name:?}: only Q and R can be diagonal")
+    }
+
     /// Its current value in `model` (vectors as one column).
     fn of(self, model: &LinearGaussianModel) -> DMatrix<f64> {
         let column = |v: &DVector<f64>| DMatrix::from_column_slice(v.len(), 1, v.as_slice());
@@ -83,6 +99,20 @@ impl Matrix {
             Matrix::Mu => column(model.mu()),
             Matrix::P1 => model.p1().clone(),
         }
+    }
+}
+
+impl std::str::FromStr for Matrix {
+    type Err = String;
+
+    /// A matrix by its name, ignoring case; the error lists the names.
+    fn from_str(name: &str) -> Result<Matrix, String> {
+        Matrix::from_name(name.trim()).ok_or_else(|| {
+            format!(
+                "unknown matrix {name:?} (known: {})",
+                Matrix::ALL.map(Matrix::name).join(", ")
+            )
+        })
     }
 }
 
@@ -197,7 +227,7 @@ pub fn transform_state(
 
 fn fix_error(message: String) -> LinearFitError {
     LinearFitError::InvalidOption {
-        option: "fixes",
+        option: "fix",
         message,
     }
 }
@@ -293,8 +323,8 @@ pub(super) fn apply(
             Matrix::Q | Matrix::R => {}
             other => {
                 return Err(LinearFitError::InvalidOption {
-                    option: "diagonal",
-                    message: format!("{other}: only Q and R can be diagonal"),
+                    option: "diag",
+                    message: Matrix::not_diagonal(other.name()),
                 });
             }
         }

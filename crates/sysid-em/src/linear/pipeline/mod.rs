@@ -877,12 +877,7 @@ fn run_em(
     polish_on: bool,
     observer: &mut impl EmObserver<LinearGaussianModel>,
 ) -> Result<(EmResult<LinearGaussianModel, LinearEmError>, usize), LinearFitError> {
-    let checked = |options: EmOptions| {
-        options.check().map_err(|e| LinearFitError::InvalidOption {
-            option: "max_iterations/tol",
-            message: e.to_string(),
-        })
-    };
+    let checked = |options: EmOptions| options.check().map_err(options::em_options_error);
     // with a polish to follow, EM only needs to reach the maximum's neighbourhood
     let em = if polish_on {
         checked(EmOptions {

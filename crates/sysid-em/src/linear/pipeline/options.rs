@@ -2,9 +2,38 @@
 //! form.
 
 use super::{Fix, LinearFitError, Matrix};
-use crate::{CheckedEmOptions, EmOptions};
+use crate::{CheckedEmOptions, EmOptions, OptionsError};
 use sysid_kalman::{InitialState, LinearGaussianModel, TrendKind};
 use sysid_subspace::WeightingChoice;
+
+/// `Display` by the type's `name()` and `FromStr` over its `ALL` and `NAMES`, the error
+/// listing the names: one spelling for the library, the command line and Python.
+macro_rules! named_choice {
+    ($t:ty, $what:literal) => {
+        impl std::fmt::Display for $t {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+
+        impl std::str::FromStr for $t {
+            type Err = String;
+
+            fn from_str(name: &str) -> Result<Self, String> {
+                <$t>::ALL
+                    .into_iter()
+                    .find(|c| c.name() == name)
+                    .ok_or_else(|| {
+                        format!(
+                            concat!("unknown ", $what, " {:?} (known: {})"),
+                            name,
+                            <$t>::NAMES.join(", ")
+                        )
+                    })
+            }
+        }
+    };
+}
 
 /// The most states an order range may reach.
 pub const MAX_ORDER: usize = 20;
@@ -90,15 +119,17 @@ pub enum Selection {
 }
 
 impl Selection {
+    /// The names, in the order of the variants.
+    pub const NAMES: [&'static str; 3] = ["bic", "aic", "validation"];
+    const ALL: [Selection; 3] = [Selection::Bic, Selection::Aic, Selection::Validation];
+
     /// `bic`, `aic` or `validation`.
     pub fn name(self) -> &'static str {
-        match self {
-            Selection::Bic => "bic",
-            Selection::Aic => "aic",
-            Selection::Validation => "validation",
-        }
+        Self::NAMES[Self::ALL.iter().position(|&s| s == self).unwrap_or(0)]
     }
 }
+
+named_choice!(Selection, "criterion");
 
 /// How EM is run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -111,14 +142,17 @@ pub enum Acceleration {
 }
 
 impl Acceleration {
+    /// The names, in the order of the variants.
+    pub const NAMES: [&'static str; 2] = ["squarem", "none"];
+    const ALL: [Acceleration; 2] = [Acceleration::Squarem, Acceleration::None];
+
     /// `squarem` or `none`.
     pub fn name(self) -> &'static str {
-        match self {
-            Acceleration::Squarem => "squarem",
-            Acceleration::None => "none",
-        }
+        Self::NAMES[Self::ALL.iter().position(|&s| s == self).unwrap_or(0)]
     }
 }
+
+named_choice!(Acceleration, "acceleration");
 
 /// A step that can be asked for, refused, or left to the fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -132,6 +166,19 @@ pub enum Switch {
     /// Never.
     Off,
 }
+
+impl Switch {
+    /// The names, in the order of the variants.
+    pub const NAMES: [&'static str; 3] = ["auto", "on", "off"];
+    const ALL: [Switch; 3] = [Switch::Auto, Switch::On, Switch::Off];
+
+    /// `auto`, `on` or `off`.
+    pub fn name(self) -> &'static str {
+        Self::NAMES[Self::ALL.iter().position(|&s| s == self).unwrap_or(0)]
+    }
+}
+
+named_choice!(Switch, "choice");
 
 /// Everything [`super::LinearFit::run`] does. Build it from [`Default`] and set the
 /// fields; [`LinearFitOptions::check`] gives the form the fit accepts.
@@ -188,6 +235,15 @@ pub struct LinearFitOptions {
     pub tol_nats: f64,
 }
 
+impl LinearFitOptions {
+    /// What runs when the subspace start's settings (`weighting`, `stable`) are given
+    /// with a start model: they are refused, not dropped.
+    pub const MODEL_START: &'static str =
+        "EM from the given start model (init is a model file, not n4sid)";
+    /// What runs when `select` is given without a range of orders.
+    pub const ONE_ORDER: &'static str = "a fit of one order (order is not a range)";
+}
+
 impl Default for LinearFitOptions {
     fn default() -> Self {
         LinearFitOptions {
@@ -238,6 +294,22 @@ fn invalid(option: &'static str, message: impl Into<String>) -> LinearFitError {
     }
 }
 
+/// The runner's refusal of EM's options, named as the fit's settings (`max_iter`,
+/// `tol`, `tol_nats`).
+pub(super) fn em_options_error(e: OptionsError) -> LinearFitError {
+    match e {
+        OptionsError::NoIterations => invalid("max_iter", "must be at least 1"),
+        OptionsError::BadTolerance { name, value } => invalid(
+            match name {
+                "distance_tol" => "tol_nats",
+                "tol" => "tol",
+                other => other,
+            },
+            format!("must be a finite non-negative number, got {value}"),
+        ),
+    }
+}
+
 impl LinearFitOptions {
     /// Checks what can be checked without the data.
     ///
@@ -254,11 +326,11 @@ impl LinearFitOptions {
             ..EmOptions::default()
         }
         .check()
-        .map_err(|e| invalid("max_iterations/tol", e.to_string()))?;
+        .map_err(em_options_error)?;
         for (k, fix) in self.fixes.iter().enumerate() {
             if self.fixes[..k].iter().any(|g| g.matrix == fix.matrix) {
                 return Err(invalid(
-                    "fixes",
+                    "fix",
                     format!("{} is fixed twice; give it once", fix.matrix),
                 ));
             }
@@ -268,13 +340,7 @@ impl LinearFitOptions {
             .iter()
             .find(|m| !matches!(m, Matrix::Q | Matrix::R))
         {
-            return Err(invalid(
-                "diagonal",
-                format!(
-                    "{other:?}: only Q and R can be diagonal",
-                    other = other.name()
-                ),
-            ));
+            return Err(invalid("diag", Matrix::not_diagonal(other.name())));
         }
         for (option, value) in [
             ("min_variance", self.min_variance),

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 import sysid
-from conftest import DATA, OSCILLATOR
+from conftest import DATA, OSCILLATOR, REPO
 
 
 def loops_during(call):
@@ -176,3 +176,32 @@ def test_chains_run_apart_concatenate_to_one_run(long_record, fitted_oscillator)
     first = sysid.pmmh(model, long_record, chains=[0, 1], **kw)
     second = sysid.pmmh(model, long_record, chains=[2, 3], **kw)
     assert sysid.Chains.concat([second, first]) == whole
+
+
+@pytest.mark.parametrize("case", ["robust", "em", "psaem", "direct", "gradient-em",
+                                  "simulation"])
+def test_ctrl_c_stops_every_fit_method_with_the_partial_result(tmp_path, long_record, case):
+    """Every method of ``fit`` stops within 2 s of Ctrl-C (gradient EM: after the
+    iteration it is in, whose M-step takes seconds) and keeps the result so far."""
+    product = tmp_path / "product.toml"
+    product.write_text(OSCILLATOR.read_text().replace("c*v", "k*c*v"))
+    tanks = REPO / "examples" / "models" / "cascaded_tanks.toml"
+    calls = {
+        "robust": lambda: sysid.fit(OSCILLATOR, long_record, max_iter=100_000),
+        "em": lambda: sysid.fit(OSCILLATOR, long_record, method="em", max_iter=10**7),
+        "psaem": lambda: sysid.fit(OSCILLATOR, long_record, method="psaem", max_iter=10**7),
+        "direct": lambda: sysid.fit(product, long_record, starts=200),
+        "gradient-em": lambda: sysid.fit(product, long_record, method="em", max_iter=10**7),
+        "simulation": lambda: sysid.fit(
+            tanks, pd.read_csv(REPO / "examples" / "data" / "cascaded_tanks_est.csv")[["u", "y"]],
+            criterion="simulation", starts=100_000),
+    }
+    interrupt_after(1.5)
+    began = time.monotonic()
+    with pytest.raises(KeyboardInterrupt) as caught:
+        calls[case]()
+    waited = time.monotonic() - began - 1.5
+    assert waited < (10.0 if case == "gradient-em" else 2.0), waited
+    partial = caught.value.partial
+    assert partial.interrupted
+    assert partial.params

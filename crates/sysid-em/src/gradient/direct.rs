@@ -295,6 +295,17 @@ pub fn fit_direct<G: GradientModel>(
     let finish_seed: u64 = stream(seed, 1).random();
     let score_seed: u64 = stream(seed, 2).random();
     let explore = |start: &Vec<f64>| -> Result<DirectStart, GradientEmError> {
+        if stop() {
+            // a start not reached before the stop: not explored
+            return Ok(DirectStart {
+                start: start.clone(),
+                start_loglik: f64::NEG_INFINITY,
+                end: start.clone(),
+                loglik: f64::NEG_INFINITY,
+                evaluations: 0,
+                converged: false,
+            });
+        }
         let likelihood = Likelihood::new(model, data, options.explore_particles, false)?;
         let common = |theta: &[f64]| likelihood.at(theta, explore_seed);
         let search = Search::new(&common, stop).with_patience(EXPLORE_PATIENCE);
@@ -342,7 +353,12 @@ pub fn fit_direct<G: GradientModel>(
                 options.explore_particles
             ))
         })?;
-    let mut warnings = {
+    // a stop in the exploration ends the run at its best point: no rival check and no
+    // finish (each costs many filters), only the exploration filter's score
+    let stopped = stop();
+    let mut warnings = if stopped {
+        Vec::new()
+    } else {
         let likelihood = Likelihood::new(model, data, options.explore_particles, true)?;
         rivals(model, &explored, chosen, |theta| {
             likelihood.at(theta, explore_seed)
@@ -352,7 +368,7 @@ pub fn fit_direct<G: GradientModel>(
     let best = &explored[chosen];
     let mut curvature = None;
     let (estimate, loglik, loglik_sd, particles, finish_evaluations, converged) =
-        if options.particles == 0 || options.evaluations == 0 {
+        if options.particles == 0 || options.evaluations == 0 || stopped {
             let likelihood = Likelihood::new(model, data, options.explore_particles, true)?;
             let (l, sd) = scored(&|t, s| likelihood.at(t, s), &best.end, score_seed);
             if !best.converged && !stop() {

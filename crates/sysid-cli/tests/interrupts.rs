@@ -1,0 +1,223 @@
+//! Ctrl-C through the binary, for every fit method and both samplers: the run stops
+//! within 2 s of the signal (gradient EM: after the iteration it is in), exits with
+//! 130, and writes the result so far, marked interrupted.
+
+#![cfg(unix)]
+
+mod common;
+
+use common::{assert_ok, s, scratch_dir, sysid};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const OSCILLATOR: &str = include_str!("../../../examples/models/oscillator.toml");
+
+/// Runs `args`, sends SIGINT after `after`, and returns (seconds from the signal to
+/// the exit, exit code, stderr).
+fn interrupted(args: &[&str], after: Duration) -> (f64, Option<i32>, String) {
+    let child = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(args)
+        .stderr(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(after);
+    let sent = Instant::now();
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    (
+        sent.elapsed().as_secs_f64(),
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
+    let dir = scratch_dir();
+    let osc = dir.join("osc.toml");
+    std::fs::write(&osc, OSCILLATOR).unwrap();
+    let product = dir.join("product.toml");
+    std::fs::write(&product, OSCILLATOR.replace("c*v", "k*c*v")).unwrap();
+    let data = dir.join("osc.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "--model",
+        s(&osc),
+        "--steps",
+        "400",
+        "--out",
+        s(&data),
+    ]));
+    let nl = dir.join("nl.csv");
+    assert_ok(&sysid(&[
+        "simulate",
+        "nlbench",
+        "--steps",
+        "300",
+        "--out",
+        s(&nl),
+    ]));
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let heating = root.join("tests/data/heating_system.csv");
+    let tanks = root.join("../../examples/models/cascaded_tanks.toml");
+    let tanks_data = root.join("../../examples/data/cascaded_tanks_est.csv");
+    let fit_toml = dir.join("fit.toml");
+    let fit_json = dir.join("fit.json");
+    let chains = dir.join("chains.csv");
+    let model = |m: &Path, data: &Path, extra: &[&'static str]| -> Vec<String> {
+        let mut args: Vec<String> = ["fit", "--model", s(m), "--data", s(data), "--force"]
+            .map(String::from)
+            .to_vec();
+        args.extend(["--out".into(), s(&fit_toml).into()]);
+        args.extend(extra.iter().map(|a| a.to_string()));
+        args
+    };
+    let cases: Vec<(&str, Vec<String>, &Path)> = vec![
+        (
+            "robust particle EM",
+            model(&osc, &data, &["--max-iter", "100000"]),
+            &fit_toml,
+        ),
+        (
+            "particle EM",
+            model(&osc, &data, &["--method", "em", "--max-iter", "10000000"]),
+            &fit_toml,
+        ),
+        (
+            "particle SAEM",
+            model(
+                &osc,
+                &data,
+                &["--method", "psaem", "--max-iter", "10000000"],
+            ),
+            &fit_toml,
+        ),
+        (
+            "direct likelihood search",
+            model(&product, &data, &["--starts", "200"]),
+            &fit_toml,
+        ),
+        (
+            "gradient EM",
+            model(
+                &product,
+                &data,
+                &["--method", "em", "--max-iter", "10000000"],
+            ),
+            &fit_toml,
+        ),
+        (
+            "simulation-error fit",
+            model(
+                &tanks,
+                &tanks_data,
+                &["--criterion", "simulation", "--starts", "100000"],
+            ),
+            &fit_toml,
+        ),
+        (
+            "fit lti",
+            [
+                "fit",
+                "lti",
+                "--data",
+                s(&heating),
+                "--order",
+                "6",
+                "--max-iter",
+                "100000000",
+                "--tol-nats",
+                "0",
+                "--polish",
+                "off",
+                "--force",
+                "--out",
+                s(&fit_json),
+            ]
+            .map(String::from)
+            .to_vec(),
+            &fit_json,
+        ),
+        (
+            "fit nlbench",
+            [
+                "fit",
+                "nlbench",
+                "--data",
+                s(&nl),
+                "--max-iter",
+                "10000000",
+                "--force",
+                "--out",
+                s(&fit_json),
+            ]
+            .map(String::from)
+            .to_vec(),
+            &fit_json,
+        ),
+        (
+            "pmmh",
+            [
+                "pmmh",
+                "--model",
+                s(&osc),
+                "--data",
+                s(&data),
+                "--iters",
+                "100000000",
+                "--chains",
+                "2",
+                "--particles",
+                "50",
+                "--out",
+                s(&chains),
+            ]
+            .map(String::from)
+            .to_vec(),
+            &chains,
+        ),
+        (
+            "pgas",
+            [
+                "pgas",
+                "--model",
+                s(&osc),
+                "--data",
+                s(&data),
+                "--iters",
+                "100000000",
+                "--particles",
+                "20",
+                "--out",
+                s(&chains),
+            ]
+            .map(String::from)
+            .to_vec(),
+            &chains,
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, args, written) in cases {
+        let _ = std::fs::remove_file(written);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (seconds, code, stderr) = interrupted(&args, Duration::from_millis(2500));
+        let report = format!("{name}: {seconds:.2} s, exit {code:?}, {}", stderr.trim());
+        eprintln!("{report}");
+        // gradient EM checks the stop between iterations only, and one iteration's
+        // M-step (BFGS over 100 smoothed paths) takes 2-5 s here: it stops after the
+        // iteration it is in (issue 58's "one run" is to reach into the M-step)
+        let limit = if name == "gradient EM" { 10.0 } else { 2.0 };
+        if seconds > limit || code != Some(130) || !written.exists() {
+            failures.push(report);
+        } else if !stderr.contains("interrupted (Ctrl-C)") {
+            failures.push(format!("{report}: not said interrupted"));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

@@ -6,36 +6,11 @@
 
 mod common;
 
-use common::{assert_ok, s, scratch_dir, sysid};
+use common::{assert_ok, interrupted_after, s, scratch_dir, sysid};
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const OSCILLATOR: &str = include_str!("../../../examples/models/oscillator.toml");
-
-/// Runs `args`, sends SIGINT after `after`, and returns (seconds from the signal to
-/// the exit, exit code, stderr).
-fn interrupted(args: &[&str], after: Duration) -> (f64, Option<i32>, String) {
-    let child = Command::new(env!("CARGO_BIN_EXE_sysid"))
-        .args(args)
-        .stderr(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(after);
-    let sent = Instant::now();
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let out = child.wait_with_output().unwrap();
-    (
-        sent.elapsed().as_secs_f64(),
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 #[test]
 fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
@@ -206,7 +181,8 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
     for (name, args, written) in cases {
         let _ = std::fs::remove_file(written);
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (seconds, code, stderr) = interrupted(&args, Duration::from_millis(2500));
+        let (out, seconds) = interrupted_after(&args, Duration::from_millis(2500));
+        let (code, stderr) = (out.status.code(), String::from_utf8_lossy(&out.stderr));
         let report = format!("{name}: {seconds:.2} s, exit {code:?}, {}", stderr.trim());
         eprintln!("{report}");
         // gradient EM checks the stop between iterations only, and one iteration's

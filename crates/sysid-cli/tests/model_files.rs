@@ -371,27 +371,13 @@ fn fit_refuses_the_options_of_other_model_classes() {
 #[cfg(unix)]
 #[test]
 fn ctrl_c_keeps_what_a_long_run_has() {
-    use std::process::{Command, Stdio};
     let dir = scratch_dir();
     let data = dir.join("nl.csv");
     ok(&["simulate", "nlbench", "--steps", "200", "--out", s(&data)]);
     let model = dir.join("nlbench.toml");
     std::fs::write(&model, sysid::modelfile::builtin::text("nlbench").unwrap()).unwrap();
-    let interrupt = |args: &[&str]| {
-        let child = Command::new(env!("CARGO_BIN_EXE_sysid"))
-            .args(args)
-            .stderr(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(1500));
-        let sent = Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(sent.success());
-        child.wait_with_output().unwrap()
-    };
+    let interrupt =
+        |args: &[&str]| common::interrupted_after(args, std::time::Duration::from_millis(1500)).0;
     let fitted = dir.join("fit.toml");
     let out = interrupt(&[
         "fit",

@@ -29,6 +29,28 @@ pub fn sysid(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// Runs the `sysid` binary on `args`, sends it SIGINT (Ctrl-C) after `after`, and
+/// returns its output and the seconds from the signal to its exit.
+#[cfg(unix)]
+pub fn interrupted_after(args: &[&str], after: std::time::Duration) -> (Output, f64) {
+    use std::process::Stdio;
+    let child = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(args)
+        .stderr(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(after);
+    let sent = std::time::Instant::now();
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    (out, sent.elapsed().as_secs_f64())
+}
+
 /// A path as `&str`.
 pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()

@@ -95,6 +95,24 @@ fn fit_lti_help_shows_the_library_defaults() {
     for (flag, value) in expected {
         assert_eq!(help_default(&text, flag), Some(value), "fit lti {flag}");
     }
+    let wiener = sysid::models::WienerFitOptions::default();
+    let text = help(&["fit", "wiener", "--help"]);
+    assert_eq!(
+        help_default(&text, "--particles"),
+        Some(wiener.particles.to_string())
+    );
+    assert_eq!(
+        help_default(&text, "--max-iter"),
+        Some(wiener.iterations.to_string())
+    );
+    for class in ["lti", "nlbench", "affine", "wiener"] {
+        let text = help(&["fit", class, "--help"]);
+        let seed = help_default(&text, "--seed");
+        assert!(
+            class == "lti" || seed == Some(sysid::smc::DEFAULT_SEED.to_string()),
+            "{class}"
+        );
+    }
     // a value outside the library's names is refused by the parser, listing them
     let out = sysid(&[
         "fit", "lti", "--data", "x.csv", "--select", "bicc", "--out", "x.json",

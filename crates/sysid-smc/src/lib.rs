@@ -64,7 +64,7 @@ pub use smoother::{
     AdditiveFunctional, Ffbsi, FfbsiReject, Genealogy, PathSmoother, Smoother, SmootherStats,
     Tanizaki, Trajectories,
 };
-pub use streams::{Rng, stream};
+pub use streams::{DEFAULT_SEED, Rng, stream};
 pub use variance::VARIANCE_SPAN;
 pub use vexp::{exp_shifted_sum, exp_shifted_sum_portable};
 pub use weights::normalise_log_weights;

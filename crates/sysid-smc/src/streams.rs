@@ -26,6 +26,9 @@ fn splitmix64(state: &mut u64) -> u64 {
     splitmix_finaliser(*state)
 }
 
+/// The seed every command and Python function uses unless given one.
+pub const DEFAULT_SEED: u64 = 1;
+
 /// The generator of piece `stream` of the work seeded by `seed`.
 ///
 /// The 256-bit state is four SplitMix64 outputs of a state that mixes both numbers,

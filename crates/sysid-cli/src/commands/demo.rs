@@ -76,7 +76,7 @@ pub struct Options {
     #[arg(long)]
     pub steps: Option<usize>,
     /// Seed of the data sets, starts and particle streams.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Print the results as one JSON line instead of the table.
     #[arg(long)]

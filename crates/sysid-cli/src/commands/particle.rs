@@ -37,7 +37,7 @@ pub struct ParticleArgs {
     #[arg(long, default_value_t = 1.0)]
     pub ess: f64,
     /// Seed of the random streams.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Independent repeats of the filter for the Monte Carlo sd of the log-likelihood
     /// estimate (a warning above 1.5 nats). 0, the default, takes the sd from the

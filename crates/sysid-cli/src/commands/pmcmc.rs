@@ -63,7 +63,7 @@ pub struct ChainArgs {
     #[arg(long)]
     pub estimate_noise: bool,
     /// Seed: chain c uses the random stream (seed, c).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Write every draw: CSV (chain, iteration, burn_in, parameters, loglik, log_prior,
     /// accepted), or JSON (one object per chain) when the name ends in `.json`.

@@ -23,7 +23,7 @@ pub struct Options {
     #[arg(long, default_value_t = 5000)]
     pub particles: usize,
     /// Nonlinear model files: the seed of the particle filter.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Output CSV: t, then per output NAME: NAME_pred, NAME_sd, NAME_error, NAME_std
     /// (the error divided by the standard deviation).

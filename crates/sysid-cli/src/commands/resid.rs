@@ -23,7 +23,7 @@ pub struct Options {
     #[arg(long, default_value_t = 5000)]
     pub particles: usize,
     /// Nonlinear model files: the seed of the particle filter.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Also write the correlations as CSV: lag, then per output NAME: NAME_acf, and per
     /// output and input: NAME_INPUT_ccf (lags -L..L; the autocorrelation is empty at

@@ -41,7 +41,7 @@ pub struct Options {
     #[arg(long, default_value_t = 1000)]
     pub steps: usize,
     /// Seed of the random generator (Xoshiro256++).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Output CSV file.
     #[arg(long)]

@@ -8,6 +8,7 @@ use sysid::em::affine::AffineFitOptions;
 use sysid::em::linear::{Acceleration, LinearFitOptions, Selection, Switch};
 use sysid::kalman::{InitialState, TrendKind};
 use sysid::modelfile::{Criterion, SimulationFitOptions};
+use sysid::models::WienerFitOptions;
 use sysid::subspace::WeightingChoice;
 
 /// A library switch's default as the command line spells it.
@@ -40,7 +41,7 @@ pub struct FitCommand {
     #[arg(long, visible_alias = "iters", default_value_t = AffineFitOptions::default().iterations)]
     pub max_iter: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// `fit --model`: `likelihood` (the default: maximum likelihood with the file's
     /// process and measurement noise, by particle EM; best for one-step prediction and
@@ -294,7 +295,7 @@ pub struct NlbenchArgs {
     #[arg(long, visible_alias = "iters", default_value_t = AffineFitOptions::default().iterations)]
     pub max_iter: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     /// Particle fits: which noise covariances are estimated: `--estimate-noise` (or
     /// `=both`) both, `=q` the process noise only, `=r` the output noise only, `=none`
@@ -335,13 +336,13 @@ pub struct WienerArgs {
     pub data: DataArgs,
     /// Maximum number of EM iterations (particle EM runs exactly this many; with
     /// `--accelerate squarem`, a budget of E-steps, three per cycle).
-    #[arg(long, visible_alias = "iters", default_value_t = 500)]
+    #[arg(long, visible_alias = "iters", default_value_t = WienerFitOptions::default().iterations)]
     pub max_iter: usize,
     /// Particle EM: particles M of the filter (and paths of `ffbsi-reject`).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = WienerFitOptions::default().particles)]
     pub particles: usize,
     /// Particle EM: seed of the random streams (same seed, same result, any machine).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = sysid::smc::DEFAULT_SEED)]
     pub seed: u64,
     #[command(flatten)]
     pub output: OutputArgs,

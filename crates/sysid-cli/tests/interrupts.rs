@@ -45,14 +45,22 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
     let fit_toml = dir.join("fit.toml");
     let fit_json = dir.join("fit.json");
     let chains = dir.join("chains.csv");
+    let out = s(&fit_toml);
     let model = |m: &Path, data: &Path, extra: &[&'static str]| -> Vec<String> {
-        let mut args: Vec<String> = ["fit", "--model", s(m), "--data", s(data), "--force"]
-            .map(String::from)
-            .to_vec();
-        args.extend(["--out".into(), s(&fit_toml).into()]);
-        args.extend(extra.iter().map(|a| a.to_string()));
-        args
+        let mut args = vec![
+            "fit",
+            "--model",
+            s(m),
+            "--data",
+            s(data),
+            "--force",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        args.into_iter().map(String::from).collect()
     };
+    let words = |args: &[&str]| -> Vec<String> { args.iter().map(|a| a.to_string()).collect() };
     let cases: Vec<(&str, Vec<String>, &Path)> = vec![
         (
             "robust particle EM",
@@ -98,7 +106,7 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
         ),
         (
             "fit lti",
-            [
+            words(&[
                 "fit",
                 "lti",
                 "--data",
@@ -114,14 +122,12 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
                 "--force",
                 "--out",
                 s(&fit_json),
-            ]
-            .map(String::from)
-            .to_vec(),
+            ]),
             &fit_json,
         ),
         (
             "fit nlbench",
-            [
+            words(&[
                 "fit",
                 "nlbench",
                 "--data",
@@ -131,14 +137,12 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
                 "--force",
                 "--out",
                 s(&fit_json),
-            ]
-            .map(String::from)
-            .to_vec(),
+            ]),
             &fit_json,
         ),
         (
             "pmmh",
-            [
+            words(&[
                 "pmmh",
                 "--model",
                 s(&osc),
@@ -152,14 +156,12 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
                 "50",
                 "--out",
                 s(&chains),
-            ]
-            .map(String::from)
-            .to_vec(),
+            ]),
             &chains,
         ),
         (
             "pgas",
-            [
+            words(&[
                 "pgas",
                 "--model",
                 s(&osc),
@@ -171,9 +173,7 @@ fn ctrl_c_stops_every_fit_method_and_sampler_within_two_seconds() {
                 "20",
                 "--out",
                 s(&chains),
-            ]
-            .map(String::from)
-            .to_vec(),
+            ]),
             &chains,
         ),
     ];

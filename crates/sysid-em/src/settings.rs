@@ -5,6 +5,7 @@
 //! EM). A setting the method that runs does not read is refused with
 //! [`SettingError::NotApplicable`], never dropped.
 
+use crate::OptionsError;
 use crate::affine::{AffineEmError, AffineFitOptions, AffineMethod, CheckedAffineFitOptions};
 use sysid_smc::PathSmoother;
 
@@ -147,6 +148,26 @@ pub enum SettingError {
         /// What is wrong with it.
         reason: String,
     },
+}
+
+/// The runner's refusal of EM's options, named as the fits' settings (`max_iter`,
+/// `tol`, `tol_nats`).
+impl From<OptionsError> for SettingError {
+    fn from(e: OptionsError) -> SettingError {
+        match e {
+            OptionsError::NoIterations => SettingError::Invalid {
+                setting: "max_iter",
+                reason: "must be at least 1".into(),
+            },
+            OptionsError::BadTolerance { name, value } => SettingError::Invalid {
+                setting: match name {
+                    "distance_tol" => "tol_nats",
+                    other => other,
+                },
+                reason: format!("must be a finite non-negative number, got {value}"),
+            },
+        }
+    }
 }
 
 impl SettingError {

@@ -233,14 +233,6 @@ pub enum FileFitError {
     /// A setting the method that runs does not read, or one out of its range.
     #[error("{0}")]
     Setting(#[from] SettingError),
-    /// An option out of its range for this model.
-    #[error("{name}: {reason}")]
-    InvalidOption {
-        /// The option, as [`sysid_em::affine::AffineFitOptions`] spells it.
-        name: &'static str,
-        /// What is wrong with its value.
-        reason: String,
-    },
     /// The file's values are not a model (a variance that is not positive).
     #[error("{0}")]
     Start(#[from] ModelError),
@@ -401,10 +393,7 @@ impl ModelFile {
             ..EmOptions::default()
         }
         .check()
-        .map_err(|e| SettingError::Invalid {
-            setting: "max_iter",
-            reason: e.to_string(),
-        })?;
+        .map_err(SettingError::from)?;
         let gradient = self.gradient();
         let start = gradient.unconstrained(&self.free_values());
         let smoother = FfbsiReject {

@@ -230,13 +230,6 @@ impl ModelFile {
                     }
                     .into());
                 }
-                if options.iterations == 0 {
-                    return Err(SettingError::Invalid {
-                        setting: "max_iter",
-                        reason: "must be at least 1".into(),
-                    }
-                    .into());
-                }
                 Ok(FileFitMethod::GradientEm(options))
             }
             method => Err(FileFitError::NotAffine {

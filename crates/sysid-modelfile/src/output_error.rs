@@ -375,7 +375,8 @@ impl ModelFile {
     ///
     /// # Errors
     /// [`FileFitError::NothingFree`] when no free parameter enters a transition or
-    /// observation equation; [`FileFitError::InvalidOption`]; [`FileFitError::Start`]
+    /// observation equation; [`FileFitError::Setting`] for an option out of its range;
+    /// [`FileFitError::Start`]
     /// when the simulation from the file's values diverges.
     pub fn fit_simulation_error(
         &self,
@@ -389,9 +390,11 @@ impl ModelFile {
                 origin: self.origin().to_string(),
             });
         }
-        let invalid = |name, reason: &str| FileFitError::InvalidOption {
-            name,
-            reason: reason.to_string(),
+        let invalid = |setting, reason: &str| {
+            FileFitError::Setting(sysid_em::SettingError::Invalid {
+                setting,
+                reason: reason.to_string(),
+            })
         };
         if options.starts == 0 {
             return Err(invalid("starts", "at least 1 run is needed"));

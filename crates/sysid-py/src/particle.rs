@@ -316,7 +316,7 @@ fn fit_model<'py>(
         (FileFitReport::Simulation(report), FileFitMethod::Simulation(options)) => {
             crate::simulation::simulation_report(py, model, report, seed, options.starts)?
         }
-        _ => likelihood_report(py, model, &fit, seed, steps_particles(&chosen))?,
+        _ => likelihood_report(py, model, &fit, seed, reported_particles(&chosen))?,
     };
     crate::run::result_or_stop(py, run.stopped_by, out)
 }
@@ -341,7 +341,7 @@ fn fit_defaults(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 
 /// The particles a likelihood method's report names (its filter's; the direct
 /// search's finishing filter's).
-fn steps_particles(method: &FileFitMethod) -> usize {
+fn reported_particles(method: &FileFitMethod) -> usize {
     match method {
         FileFitMethod::ParticleEm(options) => options.options().particles,
         FileFitMethod::GradientEm(options) => options.particles,
@@ -354,7 +354,6 @@ fn steps_particles(method: &FileFitMethod) -> usize {
 fn fit_failure(e: &FileFitError) -> Failure {
     match e {
         FileFitError::Setting(setting) => Failure::setting(setting),
-        FileFitError::InvalidOption { name, reason } => Failure::option(name, reason.clone()),
         FileFitError::NotAffine { .. } => Failure::option("method", e.to_string()),
         other => Failure::sysid(other),
     }

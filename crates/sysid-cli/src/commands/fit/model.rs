@@ -235,12 +235,6 @@ pub(super) fn file_error(o: &Options, e: FileFitError) -> CliError {
     match e {
         FileFitError::NothingFree { .. } => bad("--model", e.to_string()),
         FileFitError::NotAffine { .. } => bad("--method", e.to_string()),
-        FileFitError::InvalidOption { name, reason } => {
-            CliError::Setting(sysid::em::SettingError::Invalid {
-                setting: name,
-                reason,
-            })
-        }
         FileFitError::Setting(e) => CliError::Setting(e),
         FileFitError::Start(m) => bad("--model", m.reason),
         FileFitError::Affine(source) => CliError::AffineEm { context, source },

@@ -2,7 +2,7 @@
 //! form.
 
 use super::{Fix, LinearFitError, Matrix};
-use crate::{CheckedEmOptions, EmOptions, OptionsError};
+use crate::{CheckedEmOptions, EmOptions, OptionsError, SettingError};
 use sysid_kalman::{InitialState, LinearGaussianModel, TrendKind};
 use sysid_subspace::WeightingChoice;
 
@@ -297,16 +297,9 @@ fn invalid(option: &'static str, message: impl Into<String>) -> LinearFitError {
 /// The runner's refusal of EM's options, named as the fit's settings (`max_iter`,
 /// `tol`, `tol_nats`).
 pub(super) fn em_options_error(e: OptionsError) -> LinearFitError {
-    match e {
-        OptionsError::NoIterations => invalid("max_iter", "must be at least 1"),
-        OptionsError::BadTolerance { name, value } => invalid(
-            match name {
-                "distance_tol" => "tol_nats",
-                "tol" => "tol",
-                other => other,
-            },
-            format!("must be a finite non-negative number, got {value}"),
-        ),
+    match SettingError::from(e) {
+        SettingError::Invalid { setting, reason } => invalid(setting, reason),
+        other => invalid(other.setting(), other.to_string()),
     }
 }
 

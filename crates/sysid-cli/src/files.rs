@@ -291,9 +291,34 @@ pub fn fmt(v: f64) -> String {
     }
 }
 
+/// Formats a float for a person to read: four significant digits (an estimate's
+/// standard error is rarely known better than to two).
+pub fn short(v: f64) -> String {
+    if !v.is_finite() || v == 0.0 {
+        return fmt(v);
+    }
+    let magnitude = v.abs().log10().floor();
+    if (-3.0..6.0).contains(&magnitude) {
+        let decimals = (3.0 - magnitude).max(0.0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 #[cfg(test)]
 mod format_tests {
-    use super::fmt;
+    use super::{fmt, short};
+
+    /// Four significant digits, in plain notation where that is short.
+    #[test]
+    fn short_numbers_have_four_significant_digits() {
+        assert_eq!(short(0.5114633136309759), "0.5115");
+        assert_eq!(short(0.013350165779812961), "0.01335");
+        assert_eq!(short(1234.5678), "1235");
+        assert_eq!(short(-2.5e-7), "-2.500e-7");
+        assert_eq!(short(0.0), "0");
+    }
 
     /// Every value reads back to the same bits, and the extremes stay short.
     #[test]

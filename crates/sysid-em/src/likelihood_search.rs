@@ -268,6 +268,7 @@ impl Search<'_> {
         }
         Some(Curvature {
             point: x,
+            value: f0,
             gradient,
             hessian,
         })
@@ -284,11 +285,26 @@ pub const NEWTON_HALVINGS: usize = 5;
 /// Doublings or halvings of a curvature step.
 pub const CURVATURE_TRIES: usize = 4;
 
+/// Whether an information's eigenvalues are those of a maximum's: all finite and
+/// above [`FLAT_RATIO`] times the largest (a direction a probe found flat has 0, which
+/// rounding may leave a hair above).
+pub fn is_definite(eigenvalues: &nalgebra::DVector<f64>) -> bool {
+    let largest = eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l));
+    eigenvalues
+        .iter()
+        .all(|&l| l.is_finite() && l > FLAT_RATIO * largest)
+}
+
+/// An information eigenvalue below this fraction of the largest is a flat direction.
+pub const FLAT_RATIO: f64 = 1e-9;
+
 /// A local quadratic model of the log-likelihood (see [`Search::curvature`]).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Curvature {
     /// Where it was taken.
     pub(crate) point: Vec<f64>,
+    /// The log-likelihood there (common random numbers).
+    pub(crate) value: f64,
     /// The gradient there.
     pub(crate) gradient: nalgebra::DVector<f64>,
     /// The Hessian there (symmetric).
@@ -296,20 +312,35 @@ pub(crate) struct Curvature {
 }
 
 impl Curvature {
+    /// The information's eigenvector of the smallest eigenvalue (unit length), and that
+    /// eigenvalue (0 within [`FLAT_RATIO`] of the largest: a flat direction).
+    pub(crate) fn flattest(&self) -> Option<(nalgebra::DVector<f64>, f64)> {
+        let eigen = (-&self.hessian).symmetric_eigen();
+        let (k, &value) = eigen
+            .eigenvalues
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))?;
+        let largest = eigen.eigenvalues.iter().fold(0.0_f64, |m, &l| m.max(l));
+        let value = if value.abs() <= FLAT_RATIO * largest {
+            0.0
+        } else {
+            value
+        };
+        Some((eigen.eigenvectors.column(k).into_owned(), value))
+    }
+
     /// The information `-H` and its eigen-decomposition, when `-H` is positive
     /// definite (a maximum's neighbourhood).
     pub(crate) fn information(&self) -> Option<nalgebra::SymmetricEigen<f64, nalgebra::Dyn>> {
         let eigen = (-&self.hessian).symmetric_eigen();
-        eigen
-            .eigenvalues
-            .iter()
-            .all(|&l| l > 0.0 && l.is_finite())
-            .then_some(eigen)
+        is_definite(&eigen.eigenvalues).then_some(eigen)
     }
 
     /// The Newton point `x + (-H)^-1 g` (where the quadratic peaks), or `None` when
     /// `-H` is not positive definite.
     pub(crate) fn newton_point(&self) -> Option<Vec<f64>> {
+        self.information()?;
         let cholesky = (-&self.hessian).cholesky()?;
         let step = cholesky.solve(&self.gradient);
         Some(
@@ -346,8 +377,9 @@ impl Search<'_> {
     /// curvature ([`Self::curvature`] from `steps`, its Newton point, then Nelder–Mead
     /// along [`Curvature::whitened_directions`]), while a round gains `min_gain` nats,
     /// at most `rounds` times and within `budget` evaluations. Returns the last
-    /// curvature taken at the final point when it is a maximum's (for standard
-    /// errors), and whether the last round converged.
+    /// curvature taken (for standard errors when it is a maximum's, see
+    /// [`Curvature::information`]; otherwise where a direction is flat or rising), and
+    /// whether the last round converged.
     ///
     /// # Errors
     /// argmin refuses a simplex (its text).
@@ -363,9 +395,17 @@ impl Search<'_> {
         let mut last = None;
         for _ in 0..rounds {
             let before = self.best().1;
-            let Some(curvature) = self.curvature(steps) else {
+            let Some(mut curvature) = self.curvature(steps) else {
                 return Ok((last, converged));
             };
+            if self.probe_flat_directions(&mut curvature, steps, min_gain) == Probe::Climbed {
+                // a better point along the flattest direction: the next round starts
+                // there (the last round's climb leaves the run unconverged)
+                converged = false;
+                last = Some(curvature);
+                continue;
+            }
+            converged = true;
             if let Some(newton) = curvature.newton_point() {
                 // backtracking: along a ridge the quadratic overshoots
                 let x = &curvature.point;
@@ -383,7 +423,8 @@ impl Search<'_> {
                 }
             }
             let Some(directions) = curvature.whitened_directions() else {
-                return Ok((last, converged));
+                // not a maximum's curvature: returned, for the caller to probe or warn
+                return Ok((Some(curvature), converged));
             };
             converged =
                 self.nelder_mead_along(&directions, end.saturating_sub(self.evaluations()))?;
@@ -396,6 +437,165 @@ impl Search<'_> {
             }
         }
         Ok((last, converged))
+    }
+}
+
+/// What probing the flattest direction of a curvature found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Probe {
+    /// A point along it scored more than the gain asked above the best: it is the best
+    /// now, and the curvature is stale.
+    Climbed,
+    /// Its curvature, measured along it by points that drop by [`CURVATURE_DROP`],
+    /// replaced the estimate's.
+    Measured,
+    /// The log-likelihood barely changes along it within [`PROBE_DOUBLINGS`] doublings:
+    /// the curvature there is set to 0 (not a maximum's).
+    Flat,
+    /// A point along it is not a model, or the run was stopped: the curvature stands.
+    Unprobed,
+}
+
+/// Doublings of the step along the flattest direction before it counts as flat.
+pub const PROBE_DOUBLINGS: usize = 8;
+
+/// The target drop (nats) of the log-likelihood over a probe's step: the second
+/// difference over one and two such steps (a drop of about four times as much) is then
+/// large against the common-random-numbers roughness (tenths of a nat), which the
+/// coordinate steps' 0.5 nats are not along a ridge.
+pub const PROBE_DROP: (f64, f64) = (1.0, 4.0);
+
+/// A probe's curvature within this factor of the coordinate steps' estimate confirms
+/// it.
+pub const CONFIRMED: f64 = 4.0;
+
+impl Search<'_> {
+    /// [`Self::probe_flattest`] until the flattest direction is one already measured
+    /// (at most once per dimension): a ridge of several parameters has more than one
+    /// direction that coordinate steps cannot see. Returns the last probe's outcome, or
+    /// [`Probe::Flat`] if any direction was flat.
+    pub(crate) fn probe_flat_directions(
+        &self,
+        curvature: &mut Curvature,
+        steps: &[f64],
+        min_gain: f64,
+    ) -> Probe {
+        let mut probed: Vec<nalgebra::DVector<f64>> = Vec::new();
+        let mut flat = false;
+        for _ in 0..curvature.point.len() {
+            let Some((direction, _)) = curvature.flattest() else {
+                break;
+            };
+            if probed.iter().any(|p| p.dot(&direction).abs() > 0.9) {
+                break;
+            }
+            match self.probe_flattest(curvature, steps, min_gain) {
+                Probe::Measured => {}
+                Probe::Flat => flat = true,
+                other => return other,
+            }
+            probed.push(direction);
+        }
+        if flat { Probe::Flat } else { Probe::Measured }
+    }
+
+    /// Probes the direction along which `curvature` is flattest (the information's
+    /// eigenvector of the smallest eigenvalue). The central differences of
+    /// [`Self::curvature`] take steps fitted to each coordinate alone; along a ridge
+    /// that a combination of coordinates makes, the drop over those steps is below the
+    /// Monte Carlo roughness, and the estimated curvature there is noise (even
+    /// negative). Along that eigenvector the step grows from the quadratic's
+    /// [`PROBE_DROP`] point (or the mean coordinate step) until the two sides drop by
+    /// [`PROBE_DROP`] nats on average; a point that scores `min_gain` above the centre
+    /// is a climb. A direction whose sides never drop by that much in
+    /// [`PROBE_DOUBLINGS`] doublings is flat: its information is set to 0. Otherwise
+    /// the second difference `2 (f0 - mean(sides)) / t^2` is the curvature there; it
+    /// replaces the coordinate estimate unless it confirms it (within a factor
+    /// [`CONFIRMED`]: the coordinate steps are smaller and see the peak's own
+    /// curvature, the probe's also some of the fall-off beyond).
+    pub(crate) fn probe_flattest(
+        &self,
+        curvature: &mut Curvature,
+        steps: &[f64],
+        min_gain: f64,
+    ) -> Probe {
+        let d = curvature.point.len();
+        let Some((direction, value)) = curvature.flattest().filter(|_| d > 0) else {
+            return Probe::Unprobed;
+        };
+        // a point of the curvature's own differences may have scored a little higher
+        // than its centre (Monte Carlo roughness); more than `min_gain` is a climb
+        if self.best().1 > curvature.value + min_gain {
+            return Probe::Climbed;
+        }
+        let (centre, f0) = (curvature.point.clone(), curvature.value);
+        let along = |t: f64| -> f64 {
+            let p: Vec<f64> = centre
+                .iter()
+                .zip(direction.iter())
+                .map(|(x, v)| x + t * v)
+                .collect();
+            self.evaluate(&p)
+        };
+        let mean_step = (steps.iter().map(|h| h * h).sum::<f64>() / d as f64).sqrt();
+        let mut t = if value > 0.0 {
+            (2.0 * PROBE_DROP.0 / value).sqrt()
+        } else {
+            mean_step
+        };
+        // the step with the smallest drop of at least PROBE_DROP.0: (t, plus, minus)
+        let mut measured_at: Option<(f64, f64, f64)> = None;
+        for _ in 0..=PROBE_DOUBLINGS {
+            if self.stopped() || !(t.is_finite() && t > 0.0) {
+                return Probe::Unprobed;
+            }
+            let (plus, minus) = (along(t), along(-t));
+            if plus.max(minus) > f0 + min_gain {
+                return Probe::Climbed;
+            }
+            if !(plus.is_finite() && minus.is_finite()) {
+                t *= 0.5;
+                continue;
+            }
+            let drop = f0 - 0.5 * (plus + minus);
+            if drop >= PROBE_DROP.0 {
+                let smaller =
+                    measured_at.is_none_or(|(u, p, m)| drop < f0 - 0.5 * (p + m) || u > t);
+                if smaller {
+                    measured_at = Some((t, plus, minus));
+                }
+            }
+            if drop < PROBE_DROP.0 {
+                if measured_at.is_some() {
+                    break; // bracketed: the larger step stands
+                }
+                t *= 2.0;
+            } else if drop > PROBE_DROP.1 {
+                t *= 0.5;
+            } else {
+                break;
+            }
+        }
+        let (measured, slope) = match measured_at {
+            Some((t, plus, minus)) => (
+                2.0 * (f0 - 0.5 * (plus + minus)) / (t * t),
+                (plus - minus) / (2.0 * t),
+            ),
+            None => (0.0, curvature.gradient.dot(&direction)),
+        };
+        let confirmed =
+            value > 0.0 && measured > 0.0 && (measured / value).ln().abs() < CONFIRMED.ln();
+        if !confirmed {
+            // -H = I; I' = I + (measured - value) v v'; the slope along v from the sides
+            curvature.hessian -= (measured - value) * &direction * direction.transpose();
+            let along_gradient = curvature.gradient.dot(&direction);
+            curvature.gradient += (slope - along_gradient) * &direction;
+        }
+        if measured_at.is_some() {
+            Probe::Measured
+        } else {
+            Probe::Flat
+        }
     }
 }
 

@@ -107,6 +107,7 @@ impl ModelFile {
         Ok(FileFit {
             fitted: self.with_values(&estimate),
             estimate,
+            standard_errors: fit.standard_errors.clone(),
             report: FileFitReport::Direct {
                 fit,
                 simulation_start,

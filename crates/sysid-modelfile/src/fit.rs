@@ -51,6 +51,8 @@ pub struct FileFit {
     pub report: FileFitReport,
     /// What should temper a reading of the estimate.
     pub warnings: Vec<FileFitWarning>,
+    /// Standard errors of the estimates (see [`FileFit::standard_errors`]).
+    pub(crate) standard_errors: Option<Vec<f64>>,
 }
 
 impl FileFit {
@@ -78,13 +80,13 @@ impl FileFit {
     }
 
     /// Standard errors of the estimates, in the order of [`ModelFile::free_names`],
-    /// where the method gives them (the direct fit, from its finishing filter's
-    /// curvature; `None` otherwise).
+    /// from the curvature of an accurate filter's log-likelihood at the estimate (the
+    /// observed information on common random numbers, mapped by the delta method)
+    /// where the method takes one and it is a maximum's: the direct fit's finish and the
+    /// robust driver's polish. `None` otherwise (plain EM, PSAEM, gradient EM, the
+    /// simulation-error fit, whose own standard errors are in its report).
     pub fn standard_errors(&self) -> Option<&[f64]> {
-        match &self.report {
-            FileFitReport::Direct { fit, .. } => fit.standard_errors.as_deref(),
-            _ => None,
-        }
+        self.standard_errors.as_deref()
     }
 
     /// Whether the run was ended early.
@@ -148,6 +150,17 @@ pub enum FileFitWarning {
         /// The bound it reached.
         bound: f64,
     },
+    /// The log-likelihood's curvature at the estimate is not a maximum's: along one
+    /// direction it is flat (the data do not determine it) or still rising. No standard
+    /// errors are given.
+    NotAMaximum {
+        /// The parameters that make up that direction, largest share first.
+        names: Vec<String>,
+        /// The information along it (the smallest eigenvalue of minus the
+        /// log-likelihood's Hessian in the fit's coordinates): negative where the
+        /// log-likelihood still rises.
+        information: f64,
+    },
     /// The simulation-error fit's best run stopped before its convergence test held.
     NotConverged {
         /// MINPACK's reason.
@@ -196,6 +209,23 @@ impl std::fmt::Display for FileFitWarning {
                 "{name} = {value:.3e} ended at its bound {bound}: its standard error means \
                  little; the data would move it past the bound (drop the term, or fix {name} \
                  at {bound} if the bound is physical)"
+            ),
+            FileFitWarning::NotAMaximum { names, information } => write!(
+                f,
+                "the log-likelihood is not at a maximum: along a direction of {} it is {} \
+                 (curvature {information:.2e}), so no standard errors are given; {}",
+                names.join(", "),
+                if *information < 0.0 {
+                    "still rising"
+                } else {
+                    "flat"
+                },
+                if *information < 0.0 {
+                    "the estimate is short of the maximum: fit again from it"
+                } else {
+                    "the data do not determine that combination: fix one of them or add a \
+                     measurement that sees it"
+                }
             ),
             FileFitWarning::NotConverged { reason } => write!(
                 f,
@@ -326,6 +356,7 @@ impl ModelFile {
                     estimate: fit.estimate.clone(),
                     warnings: fit.warnings.clone(),
                     report: FileFitReport::Simulation(fit),
+                    standard_errors: None,
                 });
             }
         }?;
@@ -372,11 +403,28 @@ impl ModelFile {
                 bound,
             });
         }
+        let curvature = match &fit.report {
+            sysid_em::affine::AffineFitReport::Robust(r) => {
+                r.polish.as_ref().and_then(|p| p.curvature.as_ref())
+            }
+            _ => None,
+        };
+        let theta = |p: &sysid_em::affine::AffineParams| affine.theta(p);
+        let standard_errors = curvature.and_then(|c| c.standard_errors(theta));
+        if let Some(c) = curvature.filter(|c| !c.is_maximum())
+            && let Some((direction, information)) = c.flattest(theta)
+        {
+            warnings.push(FileFitWarning::NotAMaximum {
+                names: leading_names(&self.free_names(), &direction),
+                information,
+            });
+        }
         Ok(FileFit {
             fitted: self.with_values(&estimate),
             estimate,
             report: FileFitReport::Affine(fit),
             warnings,
+            standard_errors,
         })
     }
 
@@ -439,6 +487,7 @@ impl ModelFile {
                 iterates: values.rows,
             },
             warnings,
+            standard_errors: None,
         })
     }
 }
@@ -475,4 +524,15 @@ fn settling(names: &[String], rows: &[(f64, Vec<f64>)]) -> Vec<FileFitWarning> {
         }
     }
     warnings
+}
+
+/// The names whose entries of `direction` carry most of it (at least a tenth of the
+/// largest), largest first.
+pub(crate) fn leading_names(names: &[String], direction: &[f64]) -> Vec<String> {
+    let largest = direction.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let mut order: Vec<usize> = (0..names.len().min(direction.len()))
+        .filter(|&k| direction[k].abs() >= 0.1 * largest)
+        .collect();
+    order.sort_by(|&a, &b| direction[b].abs().total_cmp(&direction[a].abs()));
+    order.into_iter().map(|k| names[k].clone()).collect()
 }

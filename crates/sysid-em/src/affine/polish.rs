@@ -23,6 +23,16 @@
 //!    coefficient and a factor 1.35 on every variance, until the simplex's values agree
 //!    within [`SD_TOLERANCE`](crate::likelihood_search::SD_TOLERANCE) nats or the evaluation budget is spent. The best point
 //!    evaluated is kept, whatever the solver's last state.
+//! 3. **The check**: when the simplex has converged, the log-likelihood's curvature
+//!    at the best point by central differences on the same random numbers, its Newton
+//!    point, and a simplex along the curvature's eigenvectors scaled to its 1-nat
+//!    contour, repeated while a round gains [`CLIMB_GAIN`] nats (at most
+//!    [`CURVATURE_ROUNDS`] times, within another `evaluations` filters). A simplex
+//!    stalls on a ridge the data barely determine (the scale of an unmeasured state);
+//!    the Newton point and the ridge-shaped simplex walk along it. The last curvature
+//!    is the observed information: its inverse gives standard errors
+//!    ([`PolishCurvature::standard_errors`]) when it is a maximum's, and otherwise
+//!    names the direction that is flat or still rising ([`PolishCurvature::flattest`]).
 //!
 //! The reported log-likelihood is the mean of [`REPEATS`](crate::likelihood_search::REPEATS) independent filters at the
 //! result (not the common-random-numbers value it was selected on, which is biased
@@ -30,19 +40,26 @@
 //!
 //! # Complexity
 //! `evaluations + 2 (variances) x MAX_HALVINGS + 2 x REPEATS` filters of
-//! `O(T M)` each; the filter shares its particles among the free processors.
+//! `O(T M)` each, and up to `evaluations` more for the check (a curvature of `d`
+//! coordinates is `2 d^2 + 2 d` filters); the filter shares its particles among the free processors.
 
 use super::constraints::estimated_variances;
 use super::{
     AffineConstraints, AffineEmError, AffineEmSpec, AffineModel, AffineParams, free_structure,
 };
-use crate::likelihood_search::{Search, filtered_loglik, scored};
+use crate::likelihood_search::{Curvature, Search, filtered_loglik, scored};
 use nalgebra::DMatrix;
 use std::cell::RefCell;
 use sysid_smc::{FilterOptions, ParticleFilter, Series};
 
 /// Halvings (or doublings) of each noise variance before Nelder–Mead.
 pub const MAX_HALVINGS: usize = 6;
+
+/// Rounds of the check's curvature-shaped restarts.
+pub const CURVATURE_ROUNDS: usize = 3;
+
+/// A round of the check that gains this many nats is followed by another.
+pub const CLIMB_GAIN: f64 = 0.5;
 
 /// What the polish did.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,14 +75,124 @@ pub struct Polish {
     pub loglik_sd: f64,
     /// Filters run on common random numbers (the variance steps and Nelder–Mead).
     pub evaluations: usize,
-    /// Whether Nelder–Mead's simplex had converged before the budget ran out.
+    /// Whether the search had converged before its budget ran out: the simplex, and
+    /// the check's rounds, the last of which gained less than [`CLIMB_GAIN`].
     pub converged: bool,
+    /// Filters the check (the curvature rounds) ran; 0 when the simplex had not
+    /// converged or the run was stopped first.
+    pub check_evaluations: usize,
+    /// The log-likelihood gained by the check's rounds over the simplex's best
+    /// (common random numbers): more than [`CLIMB_GAIN`] means the simplex had
+    /// stalled on a ridge.
+    pub check_gain: f64,
+    /// The log-likelihood's curvature at the result, when the check took one.
+    pub curvature: Option<PolishCurvature>,
     /// Whether it was cut short by the run's stop (Ctrl-C).
     pub interrupted: bool,
 }
 
+/// The log-likelihood's curvature at the polish's result, in its coordinates (the
+/// estimated coefficients and the logarithms of the estimated noise variances): the
+/// observed information by central differences of the filter's log-likelihood on
+/// common random numbers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolishCurvature {
+    base: AffineParams,
+    coordinates: Vec<Coordinate>,
+    constraints: Option<AffineConstraints>,
+    curvature: Curvature,
+}
+
+impl PolishCurvature {
+    fn params(&self, point: &[f64]) -> AffineParams {
+        at(
+            &self.base,
+            &self.coordinates,
+            point,
+            self.constraints.as_ref(),
+        )
+    }
+
+    /// Whether it is a maximum's: the information `-H` is positive definite.
+    pub fn is_maximum(&self) -> bool {
+        self.curvature.information().is_some()
+    }
+
+    /// The standard errors of `f(params)` by the delta method, `J (-H)^-1 J'` with `J`
+    /// the Jacobian of `f` in the polish's coordinates by central differences; `None`
+    /// when the curvature is not a maximum's.
+    ///
+    /// # Example
+    /// The standard error of every state coefficient (with `fit` a
+    /// [`RobustFit`](super::RobustFit)):
+    /// ```ignore
+    /// let se = fit.polish.unwrap().curvature.unwrap()
+    ///     .standard_errors(|p| p.beta_x.iter().copied().collect());
+    /// ```
+    pub fn standard_errors(&self, f: impl Fn(&AffineParams) -> Vec<f64>) -> Option<Vec<f64>> {
+        self.curvature.information()?;
+        let covariance = (-&self.curvature.hessian).cholesky()?.inverse();
+        let jacobian = self.jacobian(&f, &covariance)?;
+        let spread = &jacobian * covariance * jacobian.transpose();
+        Some(
+            (0..spread.nrows())
+                .map(|i| spread[(i, i)].max(0.0).sqrt())
+                .collect(),
+        )
+    }
+
+    /// The direction along which the log-likelihood is flattest (or rises): the
+    /// information's eigenvector of the smallest eigenvalue, as the change of `f(params)`
+    /// along it divided by `|f|` (or 1 where `f` is 0), and that eigenvalue (negative
+    /// where the log-likelihood rises, 0 where a probe found it flat: the data do not
+    /// determine it).
+    pub fn flattest(&self, f: impl Fn(&AffineParams) -> Vec<f64>) -> Option<(Vec<f64>, f64)> {
+        let (direction, value) = self.curvature.flattest()?;
+        let scale = DMatrix::identity(direction.len(), direction.len());
+        let jacobian = self.jacobian(&f, &scale)?;
+        let centre = f(&self.params(&self.curvature.point));
+        let moved = jacobian * direction;
+        Some((
+            moved
+                .iter()
+                .zip(&centre)
+                .map(|(m, c)| if *c != 0.0 { m / c.abs() } else { *m })
+                .collect(),
+            value,
+        ))
+    }
+
+    /// The Jacobian of `f` in the coordinates by central differences with steps of a
+    /// hundredth of `spread`'s standard deviations (a coordinate's scale).
+    fn jacobian(
+        &self,
+        f: &impl Fn(&AffineParams) -> Vec<f64>,
+        spread: &DMatrix<f64>,
+    ) -> Option<DMatrix<f64>> {
+        let point = &self.curvature.point;
+        let d = point.len();
+        let rows = f(&self.params(point)).len();
+        let mut jacobian = DMatrix::zeros(rows, d);
+        for k in 0..d {
+            let h = 0.01 * spread[(k, k)].sqrt();
+            if !(h.is_finite() && h > 0.0) {
+                return None;
+            }
+            let mut plus = point.clone();
+            let mut minus = point.clone();
+            plus[k] += h;
+            minus[k] -= h;
+            let (fp, fm) = (f(&self.params(&plus)), f(&self.params(&minus)));
+            for i in 0..rows {
+                jacobian[(i, k)] = (fp[i] - fm[i]) / (2.0 * h);
+            }
+        }
+        Some(jacobian)
+    }
+}
+
 /// One coordinate of the polish.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum Coordinate {
     /// `beta_x[(row, col)]`.
     StateCoefficient(usize, usize),
@@ -276,10 +403,32 @@ pub(crate) fn polish<A: AffineModel>(
             }
         })
         .collect();
-    let converged = search
+    let mut converged = search
         .nelder_mead(&steps, evaluations)
         .map_err(AffineEmError::InvalidParams)?;
-    let (point, _) = search.best();
+    // 3. the check: the curvature, its Newton point, a simplex along the ridge
+    let (simplex_end, simplex_loglik) = search.best();
+    let simplex_evaluations = search.evaluations();
+    let mut curvature = None;
+    if converged && !stop() {
+        let third: Vec<f64> = steps.iter().map(|s| s / 3.0).collect();
+        let (last, rounds_converged) = search
+            .curvature_rounds(&third, evaluations, CLIMB_GAIN, CURVATURE_ROUNDS)
+            .map_err(AffineEmError::InvalidParams)?;
+        converged = rounds_converged;
+        curvature = last.map(|curvature| PolishCurvature {
+            base: start.clone(),
+            coordinates: coords.clone(),
+            constraints: constraints.clone(),
+            curvature,
+        });
+    }
+    let (point, best_loglik) = search.best();
+    let check_gain = if point == simplex_end {
+        0.0
+    } else {
+        best_loglik - simplex_loglik
+    };
     let (loglik, loglik_sd) = scored(&loglik, &point, seed);
     let polished = at(start, &coords, &point, constraints.as_ref());
     let evaluations = search.evaluations();
@@ -292,6 +441,9 @@ pub(crate) fn polish<A: AffineModel>(
             loglik_sd,
             evaluations,
             converged,
+            check_evaluations: evaluations - simplex_evaluations,
+            check_gain,
+            curvature,
             interrupted: stop(),
         },
     ))

@@ -460,6 +460,7 @@ pub fn fit_direct<G: GradientModel>(
 /// the unconstrained scale: `J (-H)^-1 J'` with `J` the constrained map's Jacobian by
 /// central differences.
 fn standard_errors<G: GradientModel>(model: &G, curvature: &Curvature) -> Option<Vec<f64>> {
+    curvature.information()?;
     let covariance = (-&curvature.hessian).cholesky()?.inverse();
     let z = &curvature.point;
     let d = z.len();

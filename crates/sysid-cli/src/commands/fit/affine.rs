@@ -14,12 +14,12 @@
 use super::options::Options;
 use crate::commands::particle::series_of;
 use crate::error::CliError;
-use crate::files::{DataFile, read_model, write_output};
+use crate::files::{DataFile, read_model, short, write_output};
 use std::path::Path;
 use sysid::em::affine::{
     AffineEmError, AffineEmSpec, AffineFit, AffineFitOptions, AffineFitReport, AffineMethod,
-    AffineModel, AffineParams, CheckedAffineFitOptions, RobustFit, StartStatus, describe,
-    fit_affine,
+    AffineModel, AffineParams, CLIMB_GAIN, CheckedAffineFitOptions, RobustFit, StartStatus,
+    describe, fit_affine,
 };
 use sysid::em::linear::Covariance;
 use sysid::em::{EmObserver, EmResult, FitRun, Termination};
@@ -550,6 +550,20 @@ where
     report["command"] = serde_json::json!("fit");
     report["out"] = serde_json::json!(o.out);
     report["estimate"] = named(&fit.estimate);
+    let standard_errors = fit
+        .polish
+        .as_ref()
+        .and_then(|p| p.curvature.as_ref())
+        .and_then(|c| c.standard_errors(&row));
+    report["standard_errors"] = match &standard_errors {
+        Some(se) => names
+            .iter()
+            .cloned()
+            .zip(se.iter().map(|v| serde_json::json!(v)))
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
+        None => serde_json::Value::Null,
+    };
     crate::report(o.json, report, || {
         let mut text = format!(
             "robust particle EM: {} starts, the best refined for {} iterations ({} particles) \
@@ -561,6 +575,16 @@ where
             fit.loglik_particles,
             o.out.display()
         );
+        let values: Vec<String> = names
+            .iter()
+            .zip(row(&fit.estimate))
+            .enumerate()
+            .map(|(k, (n, v))| match &standard_errors {
+                Some(se) => format!("{n} = {} (se {})", short(v), short(se[k])),
+                None => format!("{n} = {}", short(v)),
+            })
+            .collect();
+        text += &format!("\n  estimate: {}", values.join(", "));
         if fit.extrapolation.taken > 0 {
             text += &format!(
                 "\n  the refinement crawled: {} of {} extrapolated jumps along its drift raised \
@@ -579,6 +603,19 @@ where
                 p.loglik,
                 p.loglik_sd
             );
+            if p.check_evaluations > 0 {
+                text += &format!(
+                    "; its curvature ({} filters) {}",
+                    p.check_evaluations,
+                    if p.check_gain > CLIMB_GAIN {
+                        format!("led {:.2} nats higher, along a ridge", p.check_gain)
+                    } else if standard_errors.is_some() {
+                        "is a maximum's".to_string()
+                    } else {
+                        "is not a maximum's".to_string()
+                    }
+                );
+            }
         }
         text += "\n  start  status                     log-likelihood";
         for (k, s) in fit.starts.iter().enumerate() {

@@ -11,7 +11,7 @@ use super::options::Options;
 use super::toml_metadata::metadata_lines;
 use crate::commands::particle::series_of;
 use crate::error::CliError;
-use crate::files::{fmt, write_output};
+use crate::files::{fmt, short, write_output};
 use sysid::em::Termination;
 use sysid::em::gradient::{DirectFit, DirectOptions, GradientModel};
 use sysid::modelfile::{FileFit, FileFitError, FileFitMethod, FileFitReport, ModelFile};
@@ -196,8 +196,8 @@ fn report_direct(
             .zip(&fit.estimate)
             .enumerate()
             .map(|(k, (n, v))| match &direct.standard_errors {
-                Some(se) => format!("{n} = {} (se {})", fmt(*v), fmt(se[k])),
-                None => format!("{n} = {}", fmt(*v)),
+                Some(se) => format!("{n} = {} (se {})", short(*v), short(se[k])),
+                None => format!("{n} = {}", short(*v)),
             })
             .collect();
         format!(

@@ -1,0 +1,3 @@
+//! Helpers shared by the model-file tests.
+
+pub mod ar1;

@@ -393,14 +393,16 @@ impl Search<'_> {
         let end = self.evaluations() + budget;
         let mut converged = true;
         let mut last = None;
-        for _ in 0..rounds {
+        for round in 0..rounds {
             let before = self.best().1;
             let Some(mut curvature) = self.curvature(steps) else {
                 return Ok((last, converged));
             };
-            if self.probe_flat_directions(&mut curvature, steps, min_gain) == Probe::Climbed {
+            if self.probe_flat_directions(&mut curvature, steps, min_gain) == Probe::Climbed
+                && round + 1 < rounds
+            {
                 // a better point along the flattest direction: the next round starts
-                // there (the last round's climb leaves the run unconverged)
+                // there (in the last round, the simplex along the ridge does)
                 converged = false;
                 last = Some(curvature);
                 continue;

@@ -139,6 +139,8 @@ def test_fit_of_a_model_file_equals_the_command(tmp_path, oscillator_record):
         assert res.params[name] == pytest.approx(value, rel=1e-12, abs=0)
     assert res.method == "robust"
     assert res.llf == summary.get("loglik_estimate", summary.get("loglik"))
+    # the polish's curvature, probed along its flattest directions, on both faces
+    assert res.bse == summary.get("standard_errors")
 
 
 def test_direct_fit_of_a_file_that_is_not_affine_equals_the_command(tmp_path,

@@ -42,7 +42,7 @@ pub use fit::{
 };
 pub use model::{AffineModel, AffineParams, free_structure};
 pub use mstep::m_step;
-pub use polish::{CLIMB_GAIN, CURVATURE_ROUNDS, Polish, PolishCurvature};
+pub use polish::{CLIMB_GAIN, CLIMB_SDS, CURVATURE_ROUNDS, Polish, PolishCurvature};
 pub use psaem::{Psaem, StepSizes};
 pub use robust::{
     Extrapolation, LocalMaximum, RefineStop, RobustFit, RobustOptions, RobustTiming, StartOutcome,

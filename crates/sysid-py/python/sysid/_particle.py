@@ -163,8 +163,9 @@ def particle_filter(model, data, u=None, *, particles=1000, seed=1, resample="sy
 class ModelFitResults:
     """``sysid fit --model``: the fitted model file, the estimates, the log-likelihood
     estimate, the method that ran, whether Ctrl-C stopped it, and the warnings.
-    ``bse``: standard errors by name where the method gives them (the direct fit of a
-    file that is not affine), else ``None``."""
+    ``bse``: standard errors by name where the method gives them (the robust particle
+    EM fit and the direct fit, from the curvature of an accurate filter's
+    log-likelihood at the estimate, when it is a maximum's), else ``None``."""
 
     def __init__(self, raw, origin="<fit>"):
         self._raw = dict(raw)

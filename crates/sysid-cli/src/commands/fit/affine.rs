@@ -513,6 +513,8 @@ where
         "polish": fit.polish.as_ref().map(|p| serde_json::json!({
             "particles": p.particles, "evaluations": p.evaluations, "converged": p.converged,
             "em_loglik": p.start_loglik, "loglik": p.loglik, "loglik_sd": p.loglik_sd,
+            "check_evaluations": p.check_evaluations, "check_gain": p.check_gain,
+            "at_maximum": p.curvature.as_ref().map(|c| c.is_maximum()),
             "interrupted": p.interrupted})),
         "starts": starts, "local_maxima": maxima,
         "refinement": {"iterations": fit.refine_trace.len(), "particles": options.refine_particles,

@@ -448,8 +448,9 @@ pub(crate) enum Probe {
     /// A point along it scored more than the gain asked above the best: it is the best
     /// now, and the curvature is stale.
     Climbed,
-    /// Its curvature, measured along it by points that drop by [`CURVATURE_DROP`],
-    /// replaced the estimate's.
+    /// Its curvature was measured along it by points that drop by [`PROBE_DROP`]
+    /// nats, and replaced the estimate's unless it confirmed it (see
+    /// [`Search::probe_flattest`]).
     Measured,
     /// The log-likelihood barely changes along it within [`PROBE_DOUBLINGS`] doublings:
     /// the curvature there is set to 0 (not a maximum's).
@@ -461,10 +462,10 @@ pub(crate) enum Probe {
 /// Doublings of the step along the flattest direction before it counts as flat.
 pub const PROBE_DOUBLINGS: usize = 8;
 
-/// The target drop (nats) of the log-likelihood over a probe's step: the second
-/// difference over one and two such steps (a drop of about four times as much) is then
-/// large against the common-random-numbers roughness (tenths of a nat), which the
-/// coordinate steps' 0.5 nats are not along a ridge.
+/// The target drop (nats) of the log-likelihood over a probe's step: large against
+/// the common-random-numbers roughness (tenths of a nat), which the coordinate steps'
+/// 0.5 nats are not along a ridge, and small enough that the quadratic still holds
+/// (larger drops put the linear model's standard errors 20 % low).
 pub const PROBE_DROP: (f64, f64) = (1.0, 4.0);
 
 /// A probe's curvature within this factor of the coordinate steps' estimate confirms

@@ -24,11 +24,12 @@
 //!    within [`SD_TOLERANCE`](crate::likelihood_search::SD_TOLERANCE) nats or the evaluation budget is spent. The best point
 //!    evaluated is kept, whatever the solver's last state.
 //! 3. **The check**: when the simplex has converged, the log-likelihood's curvature
-//!    at the best point by central differences on the same random numbers, its Newton
-//!    point, and a simplex along the curvature's eigenvectors scaled to its 1-nat
-//!    contour, repeated while a round gains [`CLIMB_GAIN`] nats or [`CLIMB_SDS`]
-//!    Monte Carlo sds (at most [`CURVATURE_ROUNDS`] times, within another
-//!    `evaluations` filters). A simplex
+//!    at the best point by central differences on the same random numbers, probed
+//!    along its flattest directions
+//!    ([`probe_flat_directions`](crate::likelihood_search)), its Newton point, and a
+//!    simplex along the curvature's eigenvectors scaled to its 1-nat contour, repeated
+//!    while a round gains [`CLIMB_GAIN`] nats or [`CLIMB_SDS`] Monte Carlo sds (at
+//!    most [`CURVATURE_ROUNDS`] times, within another `evaluations` filters). A simplex
 //!    stalls on a ridge the data barely determine (the scale of an unmeasured state);
 //!    the Newton point and the ridge-shaped simplex walk along it. The last curvature
 //!    is the observed information: its inverse gives standard errors
@@ -86,7 +87,8 @@ pub struct Polish {
     /// Filters run on common random numbers (the variance steps and Nelder–Mead).
     pub evaluations: usize,
     /// Whether the search had converged before its budget ran out: the simplex, and
-    /// the check's rounds, the last of which gained less than [`CLIMB_GAIN`].
+    /// the check's rounds, the last of which gained less than a climb ([`CLIMB_GAIN`]
+    /// or [`CLIMB_SDS`] sds).
     pub converged: bool,
     /// Filters the check (the curvature rounds) ran; 0 when the simplex had not
     /// converged or the run was stopped first.
@@ -153,7 +155,7 @@ impl PolishCurvature {
 
     /// The direction along which the log-likelihood is flattest (or rises): the
     /// information's eigenvector of the smallest eigenvalue, as the change of `f(params)`
-    /// along it divided by `|f|` (or 1 where `f` is 0), and that eigenvalue (negative
+    /// along it divided by `|f|` (not divided where `f` is 0), and that eigenvalue (negative
     /// where the log-likelihood rises, 0 where a probe found it flat: the data do not
     /// determine it).
     pub fn flattest(&self, f: impl Fn(&AffineParams) -> Vec<f64>) -> Option<(Vec<f64>, f64)> {
